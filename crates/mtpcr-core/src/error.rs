@@ -1,0 +1,96 @@
+//! The one error type of mtpcr. Every failure caused by user input is a variant here; the
+//! library never panics on user input.
+
+use std::path::PathBuf;
+
+/// Everything that can go wrong in mtpcr, with enough context to tell the user what to fix.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum Error {
+    /// A point cloud was given with no points.
+    #[error("{cloud}: the point cloud is empty")]
+    EmptyCloud {
+        /// Which cloud ("cloud 1", a file name, ...).
+        cloud: String,
+    },
+    /// A point cloud has too few points for the method.
+    #[error("{cloud}: {points} points, but at least {needed} are needed")]
+    TooFewPoints {
+        /// Which cloud.
+        cloud: String,
+        /// Points it has.
+        points: usize,
+        /// Points needed.
+        needed: usize,
+    },
+    /// A coordinate is NaN or infinite.
+    #[error("{cloud}: point {index} has a non-finite coordinate ({value})")]
+    NonFiniteCoordinate {
+        /// Which cloud.
+        cloud: String,
+        /// Index of the first bad point.
+        index: usize,
+        /// The bad value, printed.
+        value: String,
+    },
+    /// The cloud has no spatial extent (every point identical), so no spacing can be derived.
+    #[error("{cloud}: all points are identical (the cloud has no extent)")]
+    DegenerateCloud {
+        /// Which cloud.
+        cloud: String,
+    },
+    /// A configuration value is out of its range.
+    #[error("invalid setting `{field}`: {problem}")]
+    InvalidConfig {
+        /// The config field's name (the same in Rust, Python, CLI flags and config files).
+        field: &'static str,
+        /// What is wrong and what is allowed.
+        problem: String,
+    },
+    /// A file could not be opened, read or written.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The operating system's error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A file was read but its content is not what it should be.
+    #[error("{}: {problem}", path.display())]
+    MalformedFile {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong with it.
+        problem: String,
+    },
+    /// Any other invalid argument (a transform that is not rigid, mismatched lengths, ...).
+    #[error("{0}")]
+    InvalidInput(String),
+}
+
+/// Result alias used throughout mtpcr.
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+impl Error {
+    pub(crate) fn config(field: &'static str, problem: impl Into<String>) -> Self {
+        Error::InvalidConfig {
+            field,
+            problem: problem.into(),
+        }
+    }
+
+    pub(crate) fn malformed(path: impl Into<PathBuf>, problem: impl Into<String>) -> Self {
+        Error::MalformedFile {
+            path: path.into(),
+            problem: problem.into(),
+        }
+    }
+
+    pub(crate) fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        Error::Io {
+            path: path.into(),
+            source,
+        }
+    }
+}

@@ -1,0 +1,473 @@
+//! The public entry: [`Config`], [`PreparedProblem`], [`register`] and its [`Registration`].
+
+use crate::cloud::{PointCloud, Sampling};
+use crate::error::{Error, Result};
+use crate::evolve::{self, SearchBox, Tasks};
+use crate::fitness::{CappedDistanceLoss, IndexedCloud, InlierLoss, Loss, SearchMethod};
+use crate::se3::{decode, invert_rigid, translation, Transform};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use std::ops::ControlFlow;
+use std::time::Instant;
+
+/// Fewest points a cloud may have (and fewest kept by downsampling).
+pub const MIN_POINTS: usize = 10;
+
+/// Every setting of a run. `Config::default()` is the setting recommended for users;
+/// [`Config::paper()`] reproduces the authors' reference implementation step for step.
+/// The field names are the same in Rust, Python keyword arguments, CLI flags and config files.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Config {
+    /// Individuals per population (`n`; six populations). At least 4. Paper: 100.
+    pub population_size: usize,
+    /// Generations after the initial one (`G`). Paper: 60.
+    pub generations: usize,
+    /// Fraction of each cloud's points kept by downsampling, in (0, 1]. Paper: 0.05.
+    pub sample_ratio: f64,
+    /// Downsampling method. Paper: farthest-point sampling.
+    pub sampling: Sampling,
+    /// Probability per generation and task pair of intra-task sharing (aiding <-> original
+    /// elites), in [0, 1]. Paper: 0.5.
+    pub p_intra: f64,
+    /// Probability per generation and task of inter-task sharing (the estimate composed from
+    /// the other two tasks' bests), in [0, 1]. Paper: 0.5.
+    pub p_inter: f64,
+    /// Fraction of a population kept as elites (and shared per channel), in (0, 1]. Paper: 0.1.
+    pub top_ratio: f64,
+    /// Differential-evolution scale factor `F`, in (0, 2]. Paper: 0.5.
+    pub scale_factor: f64,
+    /// SBX distribution index at the first generation (>= 0). Paper: 2.
+    pub sbx_eta_start: f64,
+    /// SBX distribution index approached at the last generation (>= 0). Paper: 10.
+    pub sbx_eta_end: f64,
+    /// Weight of the loop-closure term `alpha * tanh(||C - I||_F)` in the original tasks' loss
+    /// (>= 0). Paper: 0.05.
+    pub alpha: f64,
+    /// The aiding loss caps each point's distance at this fraction of `shift` (the largest
+    /// bounding-box side), in (0, 10]. Paper: 0.1.
+    pub aiding_cap_ratio: f64,
+    /// Aiding loss in both directions (source -> target and target -> source). Paper: false.
+    pub two_way_aiding: bool,
+    /// Divide the loop term's translations by `shift` so the term has no unit. Paper: false.
+    pub unit_free_loop_term: bool,
+    /// Recompute the parents' loop terms each generation from the new bests. Paper: false
+    /// (parents keep the loss they were scored with).
+    pub refresh_loop_term: bool,
+    /// Search structure of the losses. `fast` gives the same inlier counts as `exact`.
+    pub search: SearchMethod,
+    /// Worker threads for the loss evaluations; 0 = all cores. The result does not depend on it.
+    pub num_threads: usize,
+    /// Seed of the run; `None` draws one (reported in the result).
+    pub seed: Option<u64>,
+}
+
+impl Config {
+    /// The authors' reference setting (the paper's Section IV-C).
+    pub fn paper() -> Config {
+        Config {
+            population_size: 100,
+            generations: 60,
+            sample_ratio: 0.05,
+            sampling: Sampling::Farthest,
+            p_intra: 0.5,
+            p_inter: 0.5,
+            top_ratio: 0.1,
+            scale_factor: 0.5,
+            sbx_eta_start: 2.0,
+            sbx_eta_end: 10.0,
+            alpha: 0.05,
+            aiding_cap_ratio: 0.1,
+            two_way_aiding: false,
+            unit_free_loop_term: false,
+            refresh_loop_term: false,
+            search: SearchMethod::Fast,
+            num_threads: 0,
+            seed: None,
+        }
+    }
+
+    /// Checks every field; the error names the first bad one.
+    pub fn validate(&self) -> Result<()> {
+        fn unit(field: &'static str, v: f64) -> Result<()> {
+            if (0.0..=1.0).contains(&v) {
+                Ok(())
+            } else {
+                Err(Error::config(field, format!("must be in [0, 1], got {v}")))
+            }
+        }
+        if self.population_size < 4 || self.population_size > 1_000_000 {
+            return Err(Error::config(
+                "population_size",
+                format!("must be in 4..=1000000, got {}", self.population_size),
+            ));
+        }
+        if self.generations > 1_000_000 {
+            return Err(Error::config(
+                "generations",
+                format!("must be at most 1000000, got {}", self.generations),
+            ));
+        }
+        if !(self.sample_ratio > 0.0 && self.sample_ratio <= 1.0) {
+            return Err(Error::config(
+                "sample_ratio",
+                format!("must be in (0, 1], got {}", self.sample_ratio),
+            ));
+        }
+        unit("p_intra", self.p_intra)?;
+        unit("p_inter", self.p_inter)?;
+        if !(self.top_ratio > 0.0 && self.top_ratio <= 1.0) {
+            return Err(Error::config(
+                "top_ratio",
+                format!("must be in (0, 1], got {}", self.top_ratio),
+            ));
+        }
+        if !(self.scale_factor > 0.0 && self.scale_factor <= 2.0) {
+            return Err(Error::config(
+                "scale_factor",
+                format!("must be in (0, 2], got {}", self.scale_factor),
+            ));
+        }
+        for (field, v) in [("sbx_eta_start", self.sbx_eta_start), ("sbx_eta_end", self.sbx_eta_end)] {
+            if !(v.is_finite() && (0.0..=1000.0).contains(&v)) {
+                return Err(Error::config(field, format!("must be in [0, 1000], got {v}")));
+            }
+        }
+        if !(self.alpha.is_finite() && self.alpha >= 0.0) {
+            return Err(Error::config(
+                "alpha",
+                format!("must be finite and >= 0, got {}", self.alpha),
+            ));
+        }
+        if !(self.aiding_cap_ratio > 0.0 && self.aiding_cap_ratio <= 10.0) {
+            return Err(Error::config(
+                "aiding_cap_ratio",
+                format!("must be in (0, 10], got {}", self.aiding_cap_ratio),
+            ));
+        }
+        if self.num_threads > 4096 {
+            return Err(Error::config(
+                "num_threads",
+                format!("must be at most 4096 (0 = all cores), got {}", self.num_threads),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Loss evaluations of a complete run: `6 n + G 6 2n`.
+    pub fn evaluations(&self) -> usize {
+        6 * self.population_size * (1 + 2 * self.generations)
+    }
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Config::paper()
+    }
+}
+
+/// Reported to the observer after each generation.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Progress {
+    /// Generations finished (1-based).
+    pub generation: usize,
+    /// Generations of the complete run.
+    pub generations: usize,
+    /// Best cost of each task, in the order of [`crate::TASK_NAMES`].
+    pub best_costs: [f64; 6],
+    /// Loss evaluations so far.
+    pub evaluations: usize,
+}
+
+/// Best final costs of the six tasks.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct BestCosts {
+    /// Original tasks J1-o, J2-o, J3-o (local part plus loop term).
+    pub original: [f64; 3],
+    /// Aiding tasks J1-a, J2-a, J3-a.
+    pub aiding: [f64; 3],
+}
+
+/// The result of a registration. `transforms[0]` is T12: it maps points of cloud 1 into the
+/// frame of cloud 2 (`x_2 = T12 x_1`); likewise T23 and T31. All in the clouds' original frames.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Registration {
+    /// `[T12, T23, T31]`.
+    pub transforms: [Transform; 3],
+    /// Best final cost of each task.
+    pub best_costs: BestCosts,
+    /// Best cost of each task after the initial population (row 0) and after every generation,
+    /// in the order of [`crate::TASK_NAMES`].
+    pub history: Vec<[f64; 6]>,
+    /// Loss evaluations made.
+    pub evaluations: usize,
+    /// Generations run (less than configured when the observer stopped the run).
+    pub generations_run: usize,
+    /// False when the observer stopped the run early.
+    pub completed: bool,
+    /// Wall-clock seconds of the whole call (preparation included for [`register`]).
+    pub seconds: f64,
+    /// The seed that reproduces this result.
+    pub seed: u64,
+    /// Inlier radius eps and shift of the prepared problem, in data units.
+    pub eps: f64,
+    /// Largest bounding-box side of the prepared clouds.
+    pub shift: f64,
+}
+
+impl Registration {
+    /// `||T31 T23 T12 - I||_F`: how far the three transforms are from closing the loop.
+    pub fn loop_residual(&self) -> f64 {
+        let [t12, t23, t31] = self.transforms;
+        (t31 * t23 * t12 - Transform::identity()).norm()
+    }
+
+    /// Each cloud's transform into cloud 1's frame: `[I, T12^-1, T31]` (ready to merge).
+    pub fn poses(&self) -> [Transform; 3] {
+        [
+            Transform::identity(),
+            invert_rigid(&self.transforms[0]),
+            self.transforms[2],
+        ]
+    }
+}
+
+/// Three clouds downsampled, centred and indexed once, ready to be registered with any seed or
+/// evolution setting.
+#[derive(Debug)]
+pub struct PreparedProblem {
+    clouds: [IndexedCloud; 3],
+    centroids: [[f64; 3]; 3],
+    eps: f64,
+    shift: f64,
+    sample_ratio: f64,
+    sampling: Sampling,
+    search: SearchMethod,
+    aiding_cap_ratio: f64,
+    seconds: f64,
+}
+
+impl PreparedProblem {
+    /// Validates the clouds and the config, downsamples (random sampling uses `config.seed`, or
+    /// 0 without one), centres, derives eps and shift, and builds the search structures.
+    pub fn new(clouds: &[PointCloud; 3], config: &Config) -> Result<PreparedProblem> {
+        let start = Instant::now();
+        config.validate()?;
+        for (i, c) in clouds.iter().enumerate() {
+            c.validate(&format!("cloud {}", i + 1), MIN_POINTS)?;
+        }
+        let pool = thread_pool(config.num_threads)?;
+        let sampled: Vec<PointCloud> = pool.install(|| {
+            use rayon::prelude::*;
+            clouds
+                .par_iter()
+                .enumerate()
+                .map(|(i, c)| {
+                    let count = ((c.len() as f64 * config.sample_ratio).round() as usize)
+                        .max(MIN_POINTS)
+                        .min(c.len());
+                    match config.sampling {
+                        Sampling::Farthest => c.farthest_point_sample(count),
+                        Sampling::Random => {
+                            let seed = config.seed.unwrap_or(0) ^ (0x5eed_0000 + i as u64);
+                            c.random_sample(count, &mut ChaCha8Rng::seed_from_u64(seed))
+                        }
+                    }
+                })
+                .collect()
+        });
+        let centroids: [[f64; 3]; 3] = std::array::from_fn(|i| sampled[i].centroid());
+        let centred: Vec<PointCloud> = sampled
+            .iter()
+            .zip(&centroids)
+            .map(|(c, m)| c.translated([-m[0], -m[1], -m[2]]))
+            .collect();
+        for (i, c) in centred.iter().enumerate() {
+            c.validate(&format!("cloud {} after downsampling", i + 1), 2)?;
+        }
+        let d = centred
+            .iter()
+            .map(PointCloud::mean_nearest_neighbor_distance)
+            .sum::<f64>()
+            / 3.0;
+        let eps = std::f64::consts::FRAC_1_SQRT_2 * d;
+        let shift = centred.iter().map(PointCloud::largest_side).fold(0.0, f64::max);
+        if !(eps > 0.0 && shift > 0.0) {
+            return Err(Error::DegenerateCloud {
+                cloud: "the downsampled clouds".to_string(),
+            });
+        }
+        let cap = config.aiding_cap_ratio * shift;
+        let search = config.search;
+        let indexed: Vec<IndexedCloud> = pool.install(|| {
+            use rayon::prelude::*;
+            centred
+                .into_par_iter()
+                .map(|c| IndexedCloud::new(c.into_points(), eps, cap, search))
+                .collect()
+        });
+        let clouds: [IndexedCloud; 3] = indexed
+            .try_into()
+            .map_err(|_| Error::InvalidInput("three clouds are needed".to_string()))?;
+        Ok(PreparedProblem {
+            clouds,
+            centroids,
+            eps,
+            shift,
+            sample_ratio: config.sample_ratio,
+            sampling: config.sampling,
+            search,
+            aiding_cap_ratio: config.aiding_cap_ratio,
+            seconds: start.elapsed().as_secs_f64(),
+        })
+    }
+
+    /// The prepared (downsampled, centred) clouds.
+    pub fn clouds(&self) -> &[IndexedCloud; 3] {
+        &self.clouds
+    }
+
+    /// Inlier radius `sqrt(2)/2 * d`.
+    pub fn eps(&self) -> f64 {
+        self.eps
+    }
+
+    /// Largest bounding-box side of the prepared clouds (the translation bound).
+    pub fn shift(&self) -> f64 {
+        self.shift
+    }
+
+    /// Seconds spent preparing.
+    pub fn seconds(&self) -> f64 {
+        self.seconds
+    }
+
+    /// Loss of original task `task` (0..3), local part only, for a transform in ORIGINAL frames.
+    pub fn original_local_loss(&self, task: usize, t: &Transform) -> f64 {
+        let (s, d) = (task % 3, (task + 1) % 3);
+        let inner = self.to_centred(s, d, t);
+        InlierLoss {
+            source: &self.clouds[s],
+            target: &self.clouds[d],
+            method: self.search,
+        }
+        .evaluate(&crate::se3::Rigid::from_matrix(&inner))
+    }
+
+    fn to_centred(&self, s: usize, d: usize, t: &Transform) -> Transform {
+        let cs = self.centroids[s];
+        let ct = self.centroids[d];
+        translation([-ct[0], -ct[1], -ct[2]]) * t * translation(cs)
+    }
+
+    fn to_original(&self, s: usize, d: usize, t: &Transform) -> Transform {
+        let cs = self.centroids[s];
+        let ct = self.centroids[d];
+        translation(ct) * t * translation([-cs[0], -cs[1], -cs[2]])
+    }
+
+    /// Runs the evolution. `config`'s preparation settings (sampling, search, aiding cap) must
+    /// be those this problem was prepared with.
+    pub fn register(
+        &self,
+        config: &Config,
+        observer: Option<&mut dyn FnMut(&Progress) -> ControlFlow<()>>,
+    ) -> Result<Registration> {
+        let start = Instant::now();
+        config.validate()?;
+        let mismatch = |field: &'static str| {
+            Err(Error::config(
+                field,
+                "differs from the value this problem was prepared with; prepare it again",
+            ))
+        };
+        if config.sample_ratio != self.sample_ratio {
+            return mismatch("sample_ratio");
+        }
+        if config.sampling != self.sampling {
+            return mismatch("sampling");
+        }
+        if config.search != self.search {
+            return mismatch("search");
+        }
+        if config.aiding_cap_ratio != self.aiding_cap_ratio {
+            return mismatch("aiding_cap_ratio");
+        }
+        let seed = config.seed.unwrap_or_else(rand::random);
+        let pool = thread_pool(config.num_threads)?;
+        let c = &self.clouds;
+        let aiding: Vec<CappedDistanceLoss<'_>> = (0..3)
+            .map(|j| CappedDistanceLoss {
+                source: &c[j],
+                target: &c[(j + 1) % 3],
+                method: self.search,
+                two_way: config.two_way_aiding,
+            })
+            .collect();
+        let original: Vec<InlierLoss<'_>> = (0..3)
+            .map(|j| InlierLoss {
+                source: &c[j],
+                target: &c[(j + 1) % 3],
+                method: self.search,
+            })
+            .collect();
+        let tasks = Tasks {
+            losses: [
+                &aiding[0],
+                &aiding[1],
+                &aiding[2],
+                &original[0],
+                &original[1],
+                &original[2],
+            ],
+            search_box: SearchBox::for_shift(self.shift),
+            shift: self.shift,
+        };
+        let mut keep_going = |_: &Progress| ControlFlow::Continue(());
+        let observer = observer.unwrap_or(&mut keep_going);
+        let out = evolve::run_mtpcr(&tasks, config, seed, &pool, observer);
+        let transforms: [Transform; 3] =
+            std::array::from_fn(|j| self.to_original(j, (j + 1) % 3, &decode(&out.best[3 + j])));
+        Ok(Registration {
+            transforms,
+            best_costs: BestCosts {
+                aiding: [out.best_costs[0], out.best_costs[1], out.best_costs[2]],
+                original: [out.best_costs[3], out.best_costs[4], out.best_costs[5]],
+            },
+            history: out.history,
+            evaluations: out.evaluations,
+            generations_run: out.generations_run,
+            completed: out.completed,
+            seconds: start.elapsed().as_secs_f64(),
+            seed,
+            eps: self.eps,
+            shift: self.shift,
+        })
+    }
+}
+
+fn thread_pool(num_threads: usize) -> Result<rayon::ThreadPool> {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(num_threads)
+        .build()
+        .map_err(|e| Error::InvalidInput(format!("cannot start {num_threads} threads: {e}")))
+}
+
+/// Registers three overlapping clouds that form a loop, with no initial guess.
+///
+/// Returns T12, T23, T31 (T_ij maps cloud i into cloud j's frame) in the clouds' original
+/// frames. `observer`, if given, is called after every generation and may stop the run.
+pub fn register(
+    clouds: &[PointCloud; 3],
+    config: &Config,
+    observer: Option<&mut dyn FnMut(&Progress) -> ControlFlow<()>>,
+) -> Result<Registration> {
+    let start = Instant::now();
+    let mut config = config.clone();
+    config.validate()?;
+    config.seed = Some(config.seed.unwrap_or_else(rand::random));
+    let prepared = PreparedProblem::new(clouds, &config)?;
+    let mut result = prepared.register(&config, observer)?;
+    result.seconds = start.elapsed().as_secs_f64();
+    Ok(result)
+}
