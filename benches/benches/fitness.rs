@@ -1,1 +1,47 @@
-fn main(){}
+//! One evaluation of each loss, exact (KD-tree) and fast path, on bunny-size clouds at the
+//! default sampling (about 2,000 points per cloud after farthest-point sampling).
+
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use mtpcr_benches::bunny_a_or_synthetic;
+use mtpcr_core::fitness::{CappedDistanceLoss, InlierLoss, Loss, SearchMethod};
+use mtpcr_core::se3::{decode, random_rigid, Rigid};
+use mtpcr_core::{Config, PreparedProblem};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use std::hint::black_box;
+
+fn losses(c: &mut Criterion) {
+    let (clouds, label) = bunny_a_or_synthetic();
+    let prepared = PreparedProblem::new(&clouds, &Config::default()).expect("prepares");
+    let [a, b, _] = prepared.clouds();
+    // A mix of poses like a population's: random ones and some near the identity.
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    let mut poses: Vec<Rigid> = (0..48)
+        .map(|_| Rigid::from_matrix(&random_rigid(&mut rng, prepared.shift() * 0.5)))
+        .collect();
+    poses.extend((0..16).map(|i| Rigid::from_matrix(&decode(&[i as f64, -2.0, 1.0, 0.0, 0.001, 0.0]))));
+    let points = (a.points().len() + b.points().len()) as u64;
+
+    let mut group = c.benchmark_group(format!("original_loss/{label}"));
+    group.throughput(Throughput::Elements(points * poses.len() as u64));
+    for method in [SearchMethod::Exact, SearchMethod::Fast] {
+        let loss = InlierLoss { source: a, target: b, method };
+        group.bench_with_input(BenchmarkId::from_parameter(format!("{method:?}")), &poses, |bench, poses| {
+            bench.iter(|| poses.iter().map(|t| loss.evaluate(black_box(t))).sum::<f64>())
+        });
+    }
+    group.finish();
+
+    let mut group = c.benchmark_group(format!("aiding_loss/{label}"));
+    group.throughput(Throughput::Elements(a.points().len() as u64 * poses.len() as u64));
+    for method in [SearchMethod::Exact, SearchMethod::Fast] {
+        let loss = CappedDistanceLoss { source: a, target: b, method, two_way: false };
+        group.bench_with_input(BenchmarkId::from_parameter(format!("{method:?}")), &poses, |bench, poses| {
+            bench.iter(|| poses.iter().map(|t| loss.evaluate(black_box(t))).sum::<f64>())
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, losses);
+criterion_main!(benches);

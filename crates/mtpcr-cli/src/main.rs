@@ -123,6 +123,12 @@ struct SettingsArgs {
     /// Recompute parents' loop terms every generation.
     #[arg(long)]
     refresh_loop_term: Option<bool>,
+    /// Independent evolutions; the best (lowest original costs) is kept.
+    #[arg(long)]
+    restarts: Option<usize>,
+    /// Trimmed-ICP iterations refining each pair after the evolution (0 = off).
+    #[arg(long)]
+    refine_iterations: Option<usize>,
     /// Search structure: fast or exact.
     #[arg(long, value_parser = parse_search)]
     search: Option<SearchMethod>,
@@ -156,7 +162,7 @@ impl SettingsArgs {
         set!(
             population_size, generations, sample_ratio, sampling, p_intra, p_inter, top_ratio,
             scale_factor, sbx_eta_start, sbx_eta_end, alpha, aiding_cap_ratio, two_way_aiding,
-            unit_free_loop_term, refresh_loop_term, search
+            unit_free_loop_term, refresh_loop_term, search, restarts, refine_iterations
         );
         c.num_threads = self.threads;
         c.seed = seed;

@@ -181,20 +181,16 @@ impl PointCloud {
         for _ in 0..count {
             chosen.push(current);
             let (cx, cy, cz) = (xs[current], ys[current], zs[current]);
-            let mut best = 0usize;
-            let mut best_d = f64::NEG_INFINITY;
+            // Three branch-free passes (update, max, first index of the max) vectorise;
+            // one fused loop with a branch does not.
             for i in 0..n {
                 let dx = xs[i] - cx;
                 let dy = ys[i] - cy;
                 let dz = zs[i] - cz;
-                let d = (dx * dx + dy * dy + dz * dz).min(nearest[i]);
-                nearest[i] = d;
-                if d > best_d {
-                    best_d = d;
-                    best = i;
-                }
+                nearest[i] = (dx * dx + dy * dy + dz * dz).min(nearest[i]);
             }
-            current = best;
+            let far = nearest.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            current = nearest.iter().position(|&d| d == far).unwrap_or(0);
         }
         chosen
     }

@@ -177,6 +177,19 @@ pub(crate) fn run_mtpcr(
     pool: &rayon::ThreadPool,
     observer: &mut dyn FnMut(&Progress) -> ControlFlow<()>,
 ) -> Outcome {
+    run_mtpcr_with(tasks, config, seed, pool, observer, true)
+}
+
+/// [`run_mtpcr`]; `prune = false` evaluates every child in full (for the tests that show
+/// pruning changes nothing).
+fn run_mtpcr_with(
+    tasks: &Tasks<'_>,
+    config: &Config,
+    seed: u64,
+    pool: &rayon::ThreadPool,
+    observer: &mut dyn FnMut(&Progress) -> ControlFlow<()>,
+    prune: bool,
+) -> Outcome {
     let n = config.population_size;
     let k = elite_count(config);
     let generations = config.generations;
@@ -184,18 +197,26 @@ pub(crate) fn run_mtpcr(
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let sbox = tasks.search_box;
 
-    // Scores (cost, local) of individuals; `bests` = None leaves the loop term out.
-    let score_all = |jobs: &[(usize, Individual)], bests: Option<&[Transform; 3]>| -> Vec<(f64, f64)> {
+    // Scores (cost, local) of individuals; `bests` = None leaves the loop term out. A child
+    // whose cost is certainly >= `limits[slot]` (the worst parent's cost: such a child can
+    // never be selected) stops early and scores infinity; selection is unchanged.
+    let score_all = |jobs: &[(usize, Individual)],
+                     bests: Option<&[Transform; 3]>,
+                     limits: &[f64; 6]|
+     -> Vec<(f64, f64)> {
         pool.install(|| {
             jobs.par_iter()
                 .map(|(slot, x)| {
-                    let local = tasks.losses[*slot].evaluate(&Rigid::from_individual(x));
-                    match (bests, *slot >= 3) {
-                        (Some(b), true) => {
-                            let t = decode(x);
-                            (local + loop_term(*slot - 3, &t, b, config.alpha, unit_free), local)
-                        }
-                        _ => (local, local),
+                    let lp = match (bests, *slot >= 3) {
+                        (Some(b), true) => loop_term(*slot - 3, &decode(x), b, config.alpha, unit_free),
+                        _ => 0.0,
+                    };
+                    // The margin covers rounding in `local + lp`, so pruning never drops a child
+                    // that full evaluation would have kept.
+                    let limit = limits[*slot] - lp + 1e-12;
+                    match tasks.losses[*slot].evaluate_below(&Rigid::from_individual(x), limit) {
+                        Some(local) => (local + lp, local),
+                        None => (f64::INFINITY, f64::INFINITY),
                     }
                 })
                 .collect()
@@ -211,7 +232,7 @@ pub(crate) fn run_mtpcr(
         .enumerate()
         .flat_map(|(s, xs)| xs.iter().map(move |x| (s, *x)))
         .collect();
-    let scores = score_all(&jobs, None);
+    let scores = score_all(&jobs, None, &[f64::INFINITY; 6]);
     let mut evaluations = jobs.len();
     let mut pops: Vec<Population> = init
         .into_iter()
@@ -301,7 +322,12 @@ pub(crate) fn run_mtpcr(
             .enumerate()
             .flat_map(|(s, xs)| xs.iter().map(move |x| (s, *x)))
             .collect();
-        let scores = score_all(&jobs, Some(&bests));
+        let limits: [f64; 6] = if prune {
+            std::array::from_fn(|s| pops[s].cost[n - 1])
+        } else {
+            [f64::INFINITY; 6]
+        };
+        let scores = score_all(&jobs, Some(&bests), &limits);
         evaluations += jobs.len();
         for (s, kids) in children.into_iter().enumerate() {
             let sc = &scores[s * 2 * n..(s + 1) * 2 * n];
@@ -334,6 +360,46 @@ pub(crate) fn run_mtpcr(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn pruned_evaluation_gives_the_same_run() {
+        use crate::fitness::{CappedDistanceLoss, IndexedCloud, InlierLoss, SearchMethod};
+        let problem = crate::synthetic::three_views(5, 3000);
+        let clouds: Vec<IndexedCloud> = problem
+            .clouds
+            .iter()
+            .map(|c| {
+                let m = c.centroid();
+                let pts = c.farthest_point_sample(300).translated([-m[0], -m[1], -m[2]]);
+                IndexedCloud::new(pts.into_points(), 0.004, 0.015, SearchMethod::Fast)
+            })
+            .collect();
+        for two_way in [false, true] {
+            let aid: Vec<_> = (0..3)
+                .map(|j| CappedDistanceLoss {
+                    source: &clouds[j],
+                    target: &clouds[(j + 1) % 3],
+                    method: SearchMethod::Fast,
+                    two_way,
+                })
+                .collect();
+            let ori: Vec<_> = (0..3)
+                .map(|j| InlierLoss { source: &clouds[j], target: &clouds[(j + 1) % 3], method: SearchMethod::Fast })
+                .collect();
+            let tasks = Tasks {
+                losses: [&aid[0], &aid[1], &aid[2], &ori[0], &ori[1], &ori[2]],
+                search_box: SearchBox::for_shift(0.15),
+                shift: 0.15,
+            };
+            let config = Config { population_size: 30, generations: 15, refresh_loop_term: two_way, ..Config::paper() };
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+            let mut go = |_: &Progress| ControlFlow::Continue(());
+            let a = run_mtpcr_with(&tasks, &config, 3, &pool, &mut go, true);
+            let b = run_mtpcr_with(&tasks, &config, 3, &pool, &mut go, false);
+            assert_eq!(a.best, b.best);
+            assert_eq!(a.history, b.history);
+        }
+    }
 
     #[test]
     fn sbx_beta_is_one_at_the_middle_and_spreads_with_low_eta() {

@@ -286,6 +286,46 @@ fn dist2(a: &[f64; 3], b: &[f64; 3]) -> f64 {
     dx * dx + dy * dy + dz * dz
 }
 
+/// Points between two checks of an early exit.
+const CHUNK: usize = 64;
+
+/// Counts the points that pass `hit`; gives up (`None`) once `needed` is out of reach.
+#[inline(always)]
+fn count_chunked(points: &[[f64; 3]], needed: usize, hit: impl Fn(&[f64; 3]) -> bool) -> Option<usize> {
+    let mut count = 0usize;
+    let mut left = points.len();
+    for chunk in points.chunks(CHUNK) {
+        count += chunk.iter().filter(|p| hit(p)).count();
+        left -= chunk.len();
+        if count + left < needed {
+            return None;
+        }
+    }
+    Some(count)
+}
+
+/// Adds `value` over the points to `start` in order; gives up (`None`) once the running sum
+/// divided by `divisor` reaches `limit` (every value is >= 0, so the sum only grows).
+#[inline(always)]
+fn sum_chunked(
+    points: &[[f64; 3]],
+    start: f64,
+    divisor: f64,
+    limit: f64,
+    value: impl Fn(&[f64; 3]) -> f64,
+) -> Option<f64> {
+    let mut sum = start;
+    for chunk in points.chunks(CHUNK) {
+        for p in chunk {
+            sum += value(p);
+        }
+        if sum / divisor >= limit {
+            return None;
+        }
+    }
+    Some(sum)
+}
+
 /// One prepared cloud with its search structures, built once and shared read-only.
 #[derive(Debug)]
 pub struct IndexedCloud {
@@ -372,33 +412,44 @@ impl IndexedCloud {
             .distance
     }
 
-    /// Number of `points`, moved by `t`, that have a point of this cloud within eps.
-    pub fn count_within(&self, points: &[[f64; 3]], t: &Rigid, method: SearchMethod) -> usize {
+    /// Number of `points`, moved by `t`, that have a point of this cloud within eps; `None`
+    /// as soon as fewer than `needed` can be reached (`needed = 0` never gives up).
+    pub fn count_within(
+        &self,
+        points: &[[f64; 3]],
+        t: &Rigid,
+        method: SearchMethod,
+        needed: usize,
+    ) -> Option<usize> {
         match (&self.grid, method) {
-            (Some(g), SearchMethod::Fast) => points
-                .iter()
-                .filter(|p| g.has_point_within(&t.apply(p)))
-                .count(),
+            (Some(g), SearchMethod::Fast) => {
+                count_chunked(points, needed, |p| g.has_point_within(&t.apply(p)))
+            }
             _ => {
                 let e2 = self.eps * self.eps;
-                points
-                    .iter()
-                    .filter(|p| self.exact_nearest2(&t.apply(p)) <= e2)
-                    .count()
+                count_chunked(points, needed, |p| self.exact_nearest2(&t.apply(p)) <= e2)
             }
         }
     }
 
-    /// Sum over `points`, moved by `t`, of the capped distance to this cloud.
-    pub fn sum_capped_distance(&self, points: &[[f64; 3]], t: &Rigid, method: SearchMethod) -> f64 {
+    /// Sum over `points`, moved by `t`, of the capped distance to this cloud, added to `start`
+    /// in order; `None` as soon as `sum / divisor >= limit` is certain.
+    pub fn sum_capped_distance(
+        &self,
+        points: &[[f64; 3]],
+        t: &Rigid,
+        method: SearchMethod,
+        start: f64,
+        divisor: f64,
+        limit: f64,
+    ) -> Option<f64> {
         match (&self.field, method) {
-            (Some(f), SearchMethod::Fast) => {
-                points.iter().map(|p| f.capped_distance(&t.apply(p))).sum()
-            }
-            _ => points
-                .iter()
-                .map(|p| self.exact_nearest2(&t.apply(p)).sqrt().min(self.cap))
-                .sum(),
+            (Some(f), SearchMethod::Fast) => sum_chunked(points, start, divisor, limit, |p| {
+                f.capped_distance(&t.apply(p))
+            }),
+            _ => sum_chunked(points, start, divisor, limit, |p| {
+                self.exact_nearest2(&t.apply(p)).sqrt().min(self.cap)
+            }),
         }
     }
 
@@ -434,8 +485,16 @@ fn morton_sorted(mut points: Vec<[f64; 3]>) -> Vec<[f64; 3]> {
 
 /// A task loss: the cost of one candidate transform `source -> target`. Lower is better.
 pub trait Loss: Sync {
+    /// The cost of `t` if it is below `limit`; `None` only when the cost is certainly
+    /// `>= limit` (the evaluation may stop early then). The value returned is the same as
+    /// without a limit.
+    fn evaluate_below(&self, t: &Rigid, limit: f64) -> Option<f64>;
+
     /// The cost of `t`.
-    fn evaluate(&self, t: &Rigid) -> f64;
+    fn evaluate(&self, t: &Rigid) -> f64 {
+        self.evaluate_below(t, f64::INFINITY)
+            .expect("no cost is certainly >= infinity")
+    }
 }
 
 /// The original task's local part: `1 - (n1 + n2) / (Ns + Nt)` with `n1` the source points
@@ -454,19 +513,51 @@ pub struct InlierLoss<'a> {
 impl InlierLoss<'_> {
     /// `(n1, n2)` for `t`.
     pub fn inlier_counts(&self, t: &Rigid) -> (usize, usize) {
-        let n1 = self.target.count_within(self.source.points(), t, self.method);
+        let n1 = self.target.count_within(self.source.points(), t, self.method, 0);
         let n2 = self
             .source
-            .count_within(self.target.points(), &t.inverse(), self.method);
-        (n1, n2)
+            .count_within(self.target.points(), &t.inverse(), self.method, 0);
+        (n1.unwrap_or(0), n2.unwrap_or(0))
+    }
+
+    fn total(&self) -> usize {
+        self.source.points().len() + self.target.points().len()
+    }
+
+    /// The cost of `k` inliers, computed exactly as the loss computes it.
+    fn cost_of(&self, k: usize) -> f64 {
+        1.0 - k as f64 / self.total() as f64
     }
 }
 
 impl Loss for InlierLoss<'_> {
-    fn evaluate(&self, t: &Rigid) -> f64 {
-        let (n1, n2) = self.inlier_counts(t);
-        let total = (self.source.points().len() + self.target.points().len()) as f64;
-        1.0 - (n1 + n2) as f64 / total
+    fn evaluate_below(&self, t: &Rigid, limit: f64) -> Option<f64> {
+        let total = self.total();
+        // The fewest inliers whose cost is below `limit` (the cost falls as k grows).
+        let needed = if limit == f64::INFINITY {
+            0
+        } else {
+            let guess = ((1.0 - limit) * total as f64).floor().max(0.0) as usize;
+            let mut k = guess.saturating_sub(2).min(total + 1);
+            while k <= total && self.cost_of(k) >= limit {
+                k += 1;
+            }
+            if k > total {
+                return None;
+            }
+            k
+        };
+        let nt = self.target.points().len();
+        let n1 = self
+            .target
+            .count_within(self.source.points(), t, self.method, needed.saturating_sub(nt))?;
+        let n2 = self.source.count_within(
+            self.target.points(),
+            &t.inverse(),
+            self.method,
+            needed.saturating_sub(n1),
+        )?;
+        Some(self.cost_of(n1 + n2))
     }
 }
 
@@ -485,17 +576,27 @@ pub struct CappedDistanceLoss<'a> {
 }
 
 impl Loss for CappedDistanceLoss<'_> {
-    fn evaluate(&self, t: &Rigid) -> f64 {
-        let forward = self
-            .target
-            .sum_capped_distance(self.source.points(), t, self.method);
+    fn evaluate_below(&self, t: &Rigid, limit: f64) -> Option<f64> {
+        let ns = self.source.points().len() as f64;
         if self.two_way {
-            let backward = self
-                .source
-                .sum_capped_distance(self.target.points(), &t.inverse(), self.method);
-            (forward + backward) / (self.source.points().len() + self.target.points().len()) as f64
+            let n = ns + self.target.points().len() as f64;
+            let forward =
+                self.target
+                    .sum_capped_distance(self.source.points(), t, self.method, 0.0, n, limit)?;
+            let both = self.source.sum_capped_distance(
+                self.target.points(),
+                &t.inverse(),
+                self.method,
+                forward,
+                n,
+                limit,
+            )?;
+            Some(both / n)
         } else {
-            forward / self.source.points().len() as f64
+            let forward =
+                self.target
+                    .sum_capped_distance(self.source.points(), t, self.method, 0.0, ns, limit)?;
+            Some(forward / ns)
         }
     }
 }
@@ -607,6 +708,35 @@ mod tests {
         let ident = Rigid::from_individual(&[0.0; 6]);
         let (n1, _) = InlierLoss { source: &a, target: &a, method: SearchMethod::Fast }.inlier_counts(&ident);
         assert_eq!(n1, 2000, "a cloud is all inliers of itself");
+    }
+
+    #[test]
+    fn a_limit_only_cuts_costs_that_reach_it() {
+        let a = IndexedCloud::new(surface_points(1500, 10), 0.03, 0.2, SearchMethod::Fast);
+        let b = IndexedCloud::new(surface_points(1500, 11), 0.03, 0.2, SearchMethod::Fast);
+        let mut rng = ChaCha8Rng::seed_from_u64(12);
+        for trial in 0..40 {
+            let t = Rigid::from_individual(&[
+                rng.random_range(-8.0..8.0),
+                rng.random_range(-8.0..8.0),
+                rng.random_range(-8.0..8.0),
+                rng.random_range(-0.1..0.1),
+                rng.random_range(-0.1..0.1),
+                0.0,
+            ]);
+            let inl = InlierLoss { source: &a, target: &b, method: SearchMethod::Fast };
+            let aid = CappedDistanceLoss { source: &a, target: &b, method: SearchMethod::Fast, two_way: trial % 2 == 0 };
+            for loss in [&inl as &dyn Loss, &aid as &dyn Loss] {
+                let full = loss.evaluate(&t);
+                for limit in [full * 0.5, full, full + 1e-12, full * 1.5, 0.0] {
+                    match loss.evaluate_below(&t, limit) {
+                        Some(v) => assert_eq!(v, full),
+                        None => assert!(full >= limit, "cut {full} below limit {limit}"),
+                    }
+                }
+                assert_eq!(loss.evaluate_below(&t, full * 1.5 + 1e-9), Some(full));
+            }
+        }
     }
 
     #[test]

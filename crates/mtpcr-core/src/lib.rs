@@ -28,6 +28,7 @@ pub mod eval;
 mod evolve;
 pub mod fitness;
 pub mod io;
+mod refine;
 pub mod registration;
 pub mod se3;
 pub mod synthetic;

@@ -4,7 +4,8 @@ use crate::cloud::{PointCloud, Sampling};
 use crate::error::{Error, Result};
 use crate::evolve::{self, SearchBox, Tasks};
 use crate::fitness::{CappedDistanceLoss, IndexedCloud, InlierLoss, Loss, SearchMethod};
-use crate::se3::{decode, invert_rigid, translation, Transform};
+use crate::refine::{self, RefineCloud};
+use crate::se3::{invert_rigid, translation, Rigid, Transform};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use std::ops::ControlFlow;
@@ -56,6 +57,12 @@ pub struct Config {
     pub refresh_loop_term: bool,
     /// Search structure of the losses. `fast` gives the same inlier counts as `exact`.
     pub search: SearchMethod,
+    /// Independent evolutions (each with its own seed derived from `seed`); the one with the
+    /// lowest sum of final original-task costs is kept (beyond the paper). At least 1. Paper: 1.
+    pub restarts: usize,
+    /// Iterations of trimmed ICP refining each pair at full resolution after the evolution
+    /// (beyond the paper); 0 = off. Paper: 0.
+    pub refine_iterations: usize,
     /// Worker threads for the loss evaluations; 0 = all cores. The result does not depend on it.
     pub num_threads: usize,
     /// Seed of the run; `None` draws one (reported in the result).
@@ -82,6 +89,8 @@ impl Config {
             unit_free_loop_term: false,
             refresh_loop_term: false,
             search: SearchMethod::Fast,
+            restarts: 1,
+            refine_iterations: 0,
             num_threads: 0,
             seed: None,
         }
@@ -145,6 +154,18 @@ impl Config {
                 format!("must be in (0, 10], got {}", self.aiding_cap_ratio),
             ));
         }
+        if self.restarts == 0 || self.restarts > 1000 {
+            return Err(Error::config(
+                "restarts",
+                format!("must be in 1..=1000, got {}", self.restarts),
+            ));
+        }
+        if self.refine_iterations > 10_000 {
+            return Err(Error::config(
+                "refine_iterations",
+                format!("must be at most 10000, got {}", self.refine_iterations),
+            ));
+        }
         if self.num_threads > 4096 {
             return Err(Error::config(
                 "num_threads",
@@ -154,9 +175,9 @@ impl Config {
         Ok(())
     }
 
-    /// Loss evaluations of a complete run: `6 n + G 6 2n`.
+    /// Loss evaluations of a complete run: `restarts (6 n + G 6 2n)`.
     pub fn evaluations(&self) -> usize {
-        6 * self.population_size * (1 + 2 * self.generations)
+        self.restarts * 6 * self.population_size * (1 + 2 * self.generations)
     }
 }
 
@@ -237,6 +258,8 @@ impl Registration {
 #[derive(Debug)]
 pub struct PreparedProblem {
     clouds: [IndexedCloud; 3],
+    /// Full-resolution centred clouds for the refinement (built only when it is on).
+    full: Option<[RefineCloud; 3]>,
     centroids: [[f64; 3]; 3],
     eps: f64,
     shift: f64,
@@ -252,6 +275,7 @@ impl PreparedProblem {
     /// 0 without one), centres, derives eps and shift, and builds the search structures.
     pub fn new(clouds: &[PointCloud; 3], config: &Config) -> Result<PreparedProblem> {
         let start = Instant::now();
+        let clouds_in = clouds;
         config.validate()?;
         for (i, c) in clouds.iter().enumerate() {
             c.validate(&format!("cloud {}", i + 1), MIN_POINTS)?;
@@ -309,8 +333,22 @@ impl PreparedProblem {
         let clouds: [IndexedCloud; 3] = indexed
             .try_into()
             .map_err(|_| Error::InvalidInput("three clouds are needed".to_string()))?;
+        let full = (config.refine_iterations > 0).then(|| {
+            pool.install(|| {
+                let [a, b, c] = std::array::from_fn(|i| {
+                    let m = centroids[i];
+                    clouds_full_centred(&clouds_in[i], m)
+                });
+                let ((ra, rb), rc) = rayon::join(
+                    || rayon::join(|| RefineCloud::new(a), || RefineCloud::new(b)),
+                    || RefineCloud::new(c),
+                );
+                [ra, rb, rc]
+            })
+        });
         Ok(PreparedProblem {
             clouds,
+            full,
             centroids,
             eps,
             shift,
@@ -342,16 +380,26 @@ impl PreparedProblem {
         self.seconds
     }
 
-    /// Loss of original task `task` (0..3), local part only, for a transform in ORIGINAL frames.
-    pub fn original_local_loss(&self, task: usize, t: &Transform) -> f64 {
+    /// The losses of task `task` (0..3: T12, T23, T31) for a transform given in the ORIGINAL
+    /// frames: `(aiding loss, original local loss)` (the loop term needs the other tasks and
+    /// is left out). `two_way` selects the two-directional aiding loss.
+    pub fn task_losses(&self, task: usize, t: &Transform, two_way: bool) -> (f64, f64) {
         let (s, d) = (task % 3, (task + 1) % 3);
-        let inner = self.to_centred(s, d, t);
-        InlierLoss {
+        let inner = crate::se3::Rigid::from_matrix(&self.to_centred(s, d, t));
+        let aiding = CappedDistanceLoss {
+            source: &self.clouds[s],
+            target: &self.clouds[d],
+            method: self.search,
+            two_way,
+        }
+        .evaluate(&inner);
+        let original = InlierLoss {
             source: &self.clouds[s],
             target: &self.clouds[d],
             method: self.search,
         }
-        .evaluate(&crate::se3::Rigid::from_matrix(&inner))
+        .evaluate(&inner);
+        (aiding, original)
     }
 
     fn to_centred(&self, s: usize, d: usize, t: &Transform) -> Transform {
@@ -425,9 +473,52 @@ impl PreparedProblem {
         };
         let mut keep_going = |_: &Progress| ControlFlow::Continue(());
         let observer = observer.unwrap_or(&mut keep_going);
-        let out = evolve::run_mtpcr(&tasks, config, seed, &pool, observer);
+        let total_generations = config.restarts * config.generations;
+        let mut best: Option<evolve::Outcome> = None;
+        let mut evaluations = 0;
+        let mut generations_run = 0;
+        let mut completed = true;
+        for r in 0..config.restarts {
+            // Restart 0 uses the seed itself, so one restart is exactly the paper's run.
+            let run_seed = if r == 0 { seed } else { derive_seed(seed, r as u64) };
+            let offset = generations_run;
+            let done_before = evaluations;
+            let mut forward = |p: &Progress| {
+                observer(&Progress {
+                    generation: offset + p.generation,
+                    generations: total_generations,
+                    evaluations: done_before + p.evaluations,
+                    ..p.clone()
+                })
+            };
+            let out = evolve::run_mtpcr(&tasks, config, run_seed, &pool, &mut forward);
+            evaluations += out.evaluations;
+            generations_run += out.generations_run;
+            let stopped = !out.completed;
+            let total = |o: &evolve::Outcome| o.best_costs[3..].iter().sum::<f64>();
+            if best.as_ref().is_none_or(|b| total(&out) < total(b)) {
+                best = Some(out);
+            }
+            if stopped {
+                completed = false;
+                break;
+            }
+        }
+        let out = best.expect("at least one restart runs");
+        let mut centred: [Rigid; 3] = std::array::from_fn(|j| Rigid::from_individual(&out.best[3 + j]));
+        if config.refine_iterations > 0 {
+            let full = self.full.as_ref().ok_or_else(|| {
+                Error::config(
+                    "refine_iterations",
+                    "this problem was prepared without refinement; prepare it again",
+                )
+            })?;
+            for (j, t) in centred.iter_mut().enumerate() {
+                *t = refine::icp(&full[j], &full[(j + 1) % 3], *t, self.eps, config.refine_iterations, &pool);
+            }
+        }
         let transforms: [Transform; 3] =
-            std::array::from_fn(|j| self.to_original(j, (j + 1) % 3, &decode(&out.best[3 + j])));
+            std::array::from_fn(|j| self.to_original(j, (j + 1) % 3, &centred[j].to_matrix()));
         Ok(Registration {
             transforms,
             best_costs: BestCosts {
@@ -435,15 +526,31 @@ impl PreparedProblem {
                 original: [out.best_costs[3], out.best_costs[4], out.best_costs[5]],
             },
             history: out.history,
-            evaluations: out.evaluations,
-            generations_run: out.generations_run,
-            completed: out.completed,
+            evaluations,
+            generations_run,
+            completed,
             seconds: start.elapsed().as_secs_f64(),
             seed,
             eps: self.eps,
             shift: self.shift,
         })
     }
+}
+
+/// A well-mixed seed for restart `r` (splitmix64 of the pair).
+fn derive_seed(seed: u64, r: u64) -> u64 {
+    let mut z = seed ^ r.wrapping_mul(0x9e37_79b9_7f4a_7c15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
+fn clouds_full_centred(cloud: &PointCloud, centroid: [f64; 3]) -> Vec<[f64; 3]> {
+    cloud
+        .points()
+        .iter()
+        .map(|p| [p[0] - centroid[0], p[1] - centroid[1], p[2] - centroid[2]])
+        .collect()
 }
 
 fn thread_pool(num_threads: usize) -> Result<rayon::ThreadPool> {
