@@ -402,6 +402,39 @@ impl PreparedProblem {
         (aiding, original)
     }
 
+    /// Poses of the three clouds in cloud 1's centred frame from the two of the three
+    /// evolved pairs (a spanning tree of the loop) whose loop-closed result has the lowest
+    /// total local loss, so one poorly solved pair does not spoil the start of the refinement.
+    fn consistent_start(&self, pairs: &[Rigid; 3]) -> [Rigid; 3] {
+        let m: [Transform; 3] = std::array::from_fn(|j| pairs[j].to_matrix());
+        let id = Transform::identity();
+        // Each tree leaves out one pair; poses W_k map cloud k into cloud 1.
+        let trees: [[Transform; 3]; 3] = [
+            [id, m[2] * m[1], m[2]],                      // without T12
+            [id, invert_rigid(&m[0]), m[2]],              // without T23
+            [id, invert_rigid(&m[0]), invert_rigid(&(m[1] * m[0]))], // without T31
+        ];
+        let loss = |w: &[Transform; 3]| -> f64 {
+            (0..3)
+                .map(|i| {
+                    let j = (i + 1) % 3;
+                    let t = crate::se3::Rigid::from_matrix(&(invert_rigid(&w[j]) * w[i]));
+                    InlierLoss {
+                        source: &self.clouds[i],
+                        target: &self.clouds[j],
+                        method: self.search,
+                    }
+                    .evaluate(&t)
+                })
+                .sum()
+        };
+        let best = trees
+            .iter()
+            .min_by(|a, b| loss(a).total_cmp(&loss(b)))
+            .expect("three trees");
+        std::array::from_fn(|k| Rigid::from_matrix(&best[k]))
+    }
+
     fn to_centred(&self, s: usize, d: usize, t: &Transform) -> Transform {
         let cs = self.centroids[s];
         let ct = self.centroids[d];
@@ -505,7 +538,8 @@ impl PreparedProblem {
             }
         }
         let out = best.expect("at least one restart runs");
-        let mut centred: [Rigid; 3] = std::array::from_fn(|j| Rigid::from_individual(&out.best[3 + j]));
+        let mut centred: [Rigid; 3] =
+            std::array::from_fn(|j| Rigid::from_individual(&out.best[3 + j]));
         if config.refine_iterations > 0 {
             let full = self.full.as_ref().ok_or_else(|| {
                 Error::config(
@@ -513,9 +547,13 @@ impl PreparedProblem {
                     "this problem was prepared without refinement; prepare it again",
                 )
             })?;
-            for (j, t) in centred.iter_mut().enumerate() {
-                *t = refine::icp(&full[j], &full[(j + 1) % 3], *t, self.eps, config.refine_iterations, &pool);
-            }
+            let start = self.consistent_start(&centred);
+            let poses = refine::refine_loop(full, start, self.eps, config.refine_iterations, &pool);
+            // T_ij = W_j^-1 W_i with W_k mapping cloud k into cloud 1's (centred) frame.
+            centred = std::array::from_fn(|i| {
+                let j = (i + 1) % 3;
+                Rigid::from_matrix(&(invert_rigid(&poses[j].to_matrix()) * poses[i].to_matrix()))
+            });
         }
         let transforms: [Transform; 3] =
             std::array::from_fn(|j| self.to_original(j, (j + 1) % 3, &centred[j].to_matrix()));
