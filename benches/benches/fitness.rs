@@ -19,26 +19,57 @@ fn losses(c: &mut Criterion) {
     let mut poses: Vec<Rigid> = (0..48)
         .map(|_| Rigid::from_matrix(&random_rigid(&mut rng, prepared.shift() * 0.5)))
         .collect();
-    poses.extend((0..16).map(|i| Rigid::from_matrix(&decode(&[i as f64, -2.0, 1.0, 0.0, 0.001, 0.0]))));
+    poses.extend(
+        (0..16).map(|i| Rigid::from_matrix(&decode(&[i as f64, -2.0, 1.0, 0.0, 0.001, 0.0]))),
+    );
     let points = (a.points().len() + b.points().len()) as u64;
 
     let mut group = c.benchmark_group(format!("original_loss/{label}"));
     group.throughput(Throughput::Elements(points * poses.len() as u64));
     for method in [SearchMethod::Exact, SearchMethod::Fast] {
-        let loss = InlierLoss { source: a, target: b, method };
-        group.bench_with_input(BenchmarkId::from_parameter(format!("{method:?}")), &poses, |bench, poses| {
-            bench.iter(|| poses.iter().map(|t| loss.evaluate(black_box(t))).sum::<f64>())
-        });
+        let loss = InlierLoss {
+            source: a,
+            target: b,
+            method,
+        };
+        group.bench_with_input(
+            BenchmarkId::from_parameter(format!("{method:?}")),
+            &poses,
+            |bench, poses| {
+                bench.iter(|| {
+                    poses
+                        .iter()
+                        .map(|t| loss.evaluate(black_box(t)))
+                        .sum::<f64>()
+                })
+            },
+        );
     }
     group.finish();
 
     let mut group = c.benchmark_group(format!("aiding_loss/{label}"));
-    group.throughput(Throughput::Elements(a.points().len() as u64 * poses.len() as u64));
+    group.throughput(Throughput::Elements(
+        a.points().len() as u64 * poses.len() as u64,
+    ));
     for method in [SearchMethod::Exact, SearchMethod::Fast] {
-        let loss = CappedDistanceLoss { source: a, target: b, method, two_way: false };
-        group.bench_with_input(BenchmarkId::from_parameter(format!("{method:?}")), &poses, |bench, poses| {
-            bench.iter(|| poses.iter().map(|t| loss.evaluate(black_box(t))).sum::<f64>())
-        });
+        let loss = CappedDistanceLoss {
+            source: a,
+            target: b,
+            method,
+            two_way: false,
+        };
+        group.bench_with_input(
+            BenchmarkId::from_parameter(format!("{method:?}")),
+            &poses,
+            |bench, poses| {
+                bench.iter(|| {
+                    poses
+                        .iter()
+                        .map(|t| loss.evaluate(black_box(t)))
+                        .sum::<f64>()
+                })
+            },
+        );
     }
     group.finish();
 }

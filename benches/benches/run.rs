@@ -9,10 +9,16 @@ fn whole_run(c: &mut Criterion) {
     let mut group = c.benchmark_group(format!("paper_run/{label}"));
     group.sample_size(10);
     for threads in [1usize, 2] {
-        let config = Config { seed: Some(1), num_threads: threads, ..Config::paper() };
-        group.bench_with_input(BenchmarkId::new("threads", threads), &config, |bench, config| {
-            bench.iter(|| register(&clouds, config, None).expect("runs"))
-        });
+        let config = Config {
+            seed: Some(1),
+            num_threads: threads,
+            ..Config::paper()
+        };
+        group.bench_with_input(
+            BenchmarkId::new("threads", threads),
+            &config,
+            |bench, config| bench.iter(|| register(&clouds, config, None).expect("runs")),
+        );
     }
     group.finish();
 }

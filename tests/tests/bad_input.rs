@@ -8,7 +8,12 @@ fn clouds() -> [PointCloud; 3] {
 }
 
 fn quick() -> Config {
-    Config { generations: 1, population_size: 8, seed: Some(1), ..Config::default() }
+    Config {
+        generations: 1,
+        population_size: 8,
+        seed: Some(1),
+        ..Config::default()
+    }
 }
 
 #[test]
@@ -17,7 +22,10 @@ fn empty_cloud() {
     c[1] = PointCloud::new(vec![]);
     let e = register(&c, &quick(), None).unwrap_err();
     assert!(matches!(e, Error::EmptyCloud { .. }), "{e}");
-    assert!(e.to_string().contains("cloud 2") && e.to_string().contains("empty"), "{e}");
+    assert!(
+        e.to_string().contains("cloud 2") && e.to_string().contains("empty"),
+        "{e}"
+    );
 }
 
 #[test]
@@ -37,8 +45,14 @@ fn nan_and_infinite_coordinates() {
         pts[17][2] = bad;
         c[0] = PointCloud::new(pts);
         let e = register(&c, &quick(), None).unwrap_err();
-        assert!(matches!(e, Error::NonFiniteCoordinate { index: 17, .. }), "{e}");
-        assert!(e.to_string().contains("cloud 1") && e.to_string().contains("point 17"), "{e}");
+        assert!(
+            matches!(e, Error::NonFiniteCoordinate { index: 17, .. }),
+            "{e}"
+        );
+        assert!(
+            e.to_string().contains("cloud 1") && e.to_string().contains("point 17"),
+            "{e}"
+        );
     }
 }
 
@@ -54,20 +68,104 @@ fn all_points_identical() {
 fn config_values_out_of_range_name_the_field() {
     let base = quick();
     let cases: Vec<(&str, Config)> = vec![
-        ("population_size", Config { population_size: 2, ..base.clone() }),
-        ("sample_ratio", Config { sample_ratio: 0.0, ..base.clone() }),
-        ("sample_ratio", Config { sample_ratio: 1.5, ..base.clone() }),
-        ("sample_ratio", Config { sample_ratio: f64::NAN, ..base.clone() }),
-        ("p_intra", Config { p_intra: -0.1, ..base.clone() }),
-        ("p_inter", Config { p_inter: 2.0, ..base.clone() }),
-        ("top_ratio", Config { top_ratio: 0.0, ..base.clone() }),
-        ("scale_factor", Config { scale_factor: 0.0, ..base.clone() }),
-        ("sbx_eta_start", Config { sbx_eta_start: -1.0, ..base.clone() }),
-        ("sbx_eta_end", Config { sbx_eta_end: f64::INFINITY, ..base.clone() }),
-        ("alpha", Config { alpha: -0.05, ..base.clone() }),
-        ("aiding_cap_ratio", Config { aiding_cap_ratio: 0.0, ..base.clone() }),
-        ("generations", Config { generations: usize::MAX, ..base.clone() }),
-        ("num_threads", Config { num_threads: 100_000, ..base.clone() }),
+        (
+            "population_size",
+            Config {
+                population_size: 2,
+                ..base.clone()
+            },
+        ),
+        (
+            "sample_ratio",
+            Config {
+                sample_ratio: 0.0,
+                ..base.clone()
+            },
+        ),
+        (
+            "sample_ratio",
+            Config {
+                sample_ratio: 1.5,
+                ..base.clone()
+            },
+        ),
+        (
+            "sample_ratio",
+            Config {
+                sample_ratio: f64::NAN,
+                ..base.clone()
+            },
+        ),
+        (
+            "p_intra",
+            Config {
+                p_intra: -0.1,
+                ..base.clone()
+            },
+        ),
+        (
+            "p_inter",
+            Config {
+                p_inter: 2.0,
+                ..base.clone()
+            },
+        ),
+        (
+            "top_ratio",
+            Config {
+                top_ratio: 0.0,
+                ..base.clone()
+            },
+        ),
+        (
+            "scale_factor",
+            Config {
+                scale_factor: 0.0,
+                ..base.clone()
+            },
+        ),
+        (
+            "sbx_eta_start",
+            Config {
+                sbx_eta_start: -1.0,
+                ..base.clone()
+            },
+        ),
+        (
+            "sbx_eta_end",
+            Config {
+                sbx_eta_end: f64::INFINITY,
+                ..base.clone()
+            },
+        ),
+        (
+            "alpha",
+            Config {
+                alpha: -0.05,
+                ..base.clone()
+            },
+        ),
+        (
+            "aiding_cap_ratio",
+            Config {
+                aiding_cap_ratio: 0.0,
+                ..base.clone()
+            },
+        ),
+        (
+            "generations",
+            Config {
+                generations: usize::MAX,
+                ..base.clone()
+            },
+        ),
+        (
+            "num_threads",
+            Config {
+                num_threads: 100_000,
+                ..base.clone()
+            },
+        ),
     ];
     for (field, config) in cases {
         let e = register(&clouds(), &config, None).unwrap_err();
@@ -85,12 +183,18 @@ fn unreadable_and_malformed_ply_files_name_the_file() {
     std::fs::create_dir_all(&dir).unwrap();
     let missing = dir.join("missing.ply");
     let e = read_ply(&missing).unwrap_err();
-    assert!(matches!(e, Error::Io { .. }) && e.to_string().contains("missing.ply"), "{e}");
+    assert!(
+        matches!(e, Error::Io { .. }) && e.to_string().contains("missing.ply"),
+        "{e}"
+    );
 
     let garbage = dir.join("garbage.ply");
     std::fs::write(&garbage, [0u8, 159, 146, 150, 10, 1, 2]).unwrap();
     let e = read_ply(&garbage).unwrap_err();
-    assert!(matches!(e, Error::MalformedFile { .. }) && e.to_string().contains("garbage.ply"), "{e}");
+    assert!(
+        matches!(e, Error::MalformedFile { .. }) && e.to_string().contains("garbage.ply"),
+        "{e}"
+    );
 
     let bad_number = dir.join("bad_number.ply");
     std::fs::write(
@@ -102,5 +206,8 @@ fn unreadable_and_malformed_ply_files_name_the_file() {
     assert!(e.to_string().contains("bad_number.ply"), "{e}");
 
     let dir_as_file = read_ply(&dir).unwrap_err();
-    assert!(dir_as_file.to_string().contains(&dir.display().to_string()), "{dir_as_file}");
+    assert!(
+        dir_as_file.to_string().contains(&dir.display().to_string()),
+        "{dir_as_file}"
+    );
 }

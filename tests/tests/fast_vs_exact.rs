@@ -32,19 +32,40 @@ fn check(clouds: &[PointCloud; 3], trials: usize, seed: u64) {
             mtpcr_core::se3::decode(&small)
         };
         let r = Rigid::from_matrix(&m);
-        let fast = InlierLoss { source: &c[s], target: &c[t], method: SearchMethod::Fast };
-        let exact = InlierLoss { method: SearchMethod::Exact, ..fast };
+        let fast = InlierLoss {
+            source: &c[s],
+            target: &c[t],
+            method: SearchMethod::Fast,
+        };
+        let exact = InlierLoss {
+            method: SearchMethod::Exact,
+            ..fast
+        };
         let (n1, n2) = fast.inlier_counts(&r);
         assert_eq!((n1, n2), exact.inlier_counts(&r), "trial {trial}");
         assert_eq!(fast.evaluate(&r), exact.evaluate(&r));
         with_inliers += usize::from(n1 + n2 > 0);
-        let fa = CappedDistanceLoss { source: &c[s], target: &c[t], method: SearchMethod::Fast, two_way: false };
-        let ex = CappedDistanceLoss { method: SearchMethod::Exact, ..fa };
+        let fa = CappedDistanceLoss {
+            source: &c[s],
+            target: &c[t],
+            method: SearchMethod::Fast,
+            two_way: false,
+        };
+        let ex = CappedDistanceLoss {
+            method: SearchMethod::Exact,
+            ..fa
+        };
         let bound = c[t].field_error_bound();
         let d = (fa.evaluate(&r) - ex.evaluate(&r)).abs();
-        assert!(d <= bound, "trial {trial}: aiding loss differs by {d} > {bound}");
+        assert!(
+            d <= bound,
+            "trial {trial}: aiding loss differs by {d} > {bound}"
+        );
     }
-    assert!(with_inliers > trials / 3, "the trials must include overlapping poses");
+    assert!(
+        with_inliers > trials / 3,
+        "the trials must include overlapping poses"
+    );
 }
 
 #[test]
@@ -56,7 +77,10 @@ fn identical_inlier_counts_on_bunny_size_synthetic_clouds() {
 
 #[test]
 fn identical_inlier_counts_on_real_scans() {
-    let Some(shared) = common::shared_dir() else { return };
-    let problem = mtpcr_core::io::Problem::load(shared.join("problems/bunny-a.json"), None).unwrap();
+    let Some(shared) = common::shared_dir() else {
+        return;
+    };
+    let problem =
+        mtpcr_core::io::Problem::load(shared.join("problems/bunny-a.json"), None).unwrap();
     check(&problem.read_scans().unwrap(), 150, 2);
 }

@@ -9,15 +9,30 @@ use mtpcr_core::Config;
 
 #[test]
 fn every_shared_scan_loads() {
-    let Some(shared) = common::shared_dir() else { return };
+    let Some(shared) = common::shared_dir() else {
+        return;
+    };
     let mut count = 0;
-    for set in ["bunny", "dragon_stand", "happy_stand", "3dmatch_redkitchen", "3dmatch_home_at"] {
-        let Ok(entries) = std::fs::read_dir(shared.join("data").join(set)) else { continue };
+    for set in [
+        "bunny",
+        "dragon_stand",
+        "happy_stand",
+        "3dmatch_redkitchen",
+        "3dmatch_home_at",
+    ] {
+        let Ok(entries) = std::fs::read_dir(shared.join("data").join(set)) else {
+            continue;
+        };
         for entry in entries.flatten() {
             let path = entry.path();
             if path.extension().is_some_and(|e| e == "ply") {
                 let cloud = read_ply(&path).unwrap_or_else(|e| panic!("{e}"));
-                assert!(cloud.len() > 1000, "{}: only {} points", path.display(), cloud.len());
+                assert!(
+                    cloud.len() > 1000,
+                    "{}: only {} points",
+                    path.display(),
+                    cloud.len()
+                );
                 cloud.validate(&path.display().to_string(), 10).unwrap();
                 count += 1;
             }
@@ -28,10 +43,13 @@ fn every_shared_scan_loads() {
 
 #[test]
 fn bunny_a_is_registered_within_five_degrees() {
-    let Some(shared) = common::shared_dir() else { return };
+    let Some(shared) = common::shared_dir() else {
+        return;
+    };
     let problem = Problem::load(shared.join("problems/bunny-a.json"), None).unwrap();
     let clouds = problem.read_scans().unwrap();
-    let (result, scores) = run_moved(&clouds, &problem.ground_truth(), &Config::default(), 7).unwrap();
+    let (result, scores) =
+        run_moved(&clouds, &problem.ground_truth(), &Config::default(), 7).unwrap();
     assert!(scores.success, "rotation errors {:?} deg", scores.rot_deg);
     assert!(scores.err_r < 0.05, "Err_R {}", scores.err_r);
     assert!(result.loop_residual() < 0.05);

@@ -14,24 +14,36 @@ const MAX_TRANSLATION: f64 = 0.01 * 0.15;
 fn default_config_recovers_a_synthetic_loop() {
     for seed in [1, 2] {
         let problem = synthetic::three_views(seed, 12_000);
-        let config = Config { seed: Some(seed), ..Config::default() };
+        let config = Config {
+            seed: Some(seed),
+            ..Config::default()
+        };
         let r = register(&problem.clouds, &config, None).expect("registration runs");
         let s = score(&r.transforms, &problem.ground_truth);
         for i in 0..3 {
             let dt = translation_error(&r.transforms[i], &problem.ground_truth[i]);
-            assert!(s.rot_deg[i] < MAX_ROTATION_DEG, "seed {seed} pair {i}: {:.3} deg", s.rot_deg[i]);
-            assert!(dt < MAX_TRANSLATION, "seed {seed} pair {i}: translation {dt:.2e}");
+            assert!(
+                s.rot_deg[i] < MAX_ROTATION_DEG,
+                "seed {seed} pair {i}: {:.3} deg",
+                s.rot_deg[i]
+            );
+            assert!(
+                dt < MAX_TRANSLATION,
+                "seed {seed} pair {i}: translation {dt:.2e}"
+            );
         }
-        assert!(r.loop_residual() < 0.05, "loop residual {}", r.loop_residual());
+        assert!(
+            r.loop_residual() < 0.05,
+            "loop residual {}",
+            r.loop_residual()
+        );
         assert_eq!(r.evaluations, config.evaluations());
         assert_eq!(r.history.len(), config.generations + 1);
         assert_eq!(r.seed, seed);
         // Best costs never get worse from one generation to the next for aiding tasks (their
         // loss does not change); original tasks may move with the loop term.
         for w in r.history.windows(2) {
-            for t in 0..3 {
-                assert!(w[1][t] <= w[0][t]);
-            }
+            assert!((0..3).all(|t| w[1][t] <= w[0][t]), "{w:?}");
         }
         let poses = r.poses();
         assert_eq!(poses[0], Transform::identity());
@@ -42,7 +54,12 @@ fn default_config_recovers_a_synthetic_loop() {
 #[test]
 fn observer_sees_every_generation_and_can_stop_the_run() {
     let problem = synthetic::three_views(3, 4000);
-    let config = Config { seed: Some(3), generations: 12, population_size: 20, ..Config::default() };
+    let config = Config {
+        seed: Some(3),
+        generations: 12,
+        population_size: 20,
+        ..Config::default()
+    };
     let mut seen = Vec::new();
     let mut obs = |p: &mtpcr_core::Progress| {
         seen.push(p.generation);
@@ -54,7 +71,11 @@ fn observer_sees_every_generation_and_can_stop_the_run() {
     assert!(r.completed);
 
     let mut stop_at_5 = |p: &mtpcr_core::Progress| {
-        if p.generation == 5 { ControlFlow::Break(()) } else { ControlFlow::Continue(()) }
+        if p.generation == 5 {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(())
+        }
     };
     let r = register(&problem.clouds, &config, Some(&mut stop_at_5)).unwrap();
     assert!(!r.completed);
@@ -66,11 +87,24 @@ fn observer_sees_every_generation_and_can_stop_the_run() {
 #[test]
 fn no_sharing_is_a_setting_and_still_runs() {
     let problem = synthetic::three_views(4, 4000);
-    let nks = Config { seed: Some(4), p_intra: 0.0, p_inter: 0.0, generations: 10, ..Config::default() };
-    let full = Config { p_intra: 0.5, p_inter: 0.5, ..nks.clone() };
+    let nks = Config {
+        seed: Some(4),
+        p_intra: 0.0,
+        p_inter: 0.0,
+        generations: 10,
+        ..Config::default()
+    };
+    let full = Config {
+        p_intra: 0.5,
+        p_inter: 0.5,
+        ..nks.clone()
+    };
     let a = register(&problem.clouds, &nks, None).unwrap();
     let b = register(&problem.clouds, &full, None).unwrap();
-    assert_ne!(a.transforms, b.transforms, "the sharing probabilities change the run");
+    assert_ne!(
+        a.transforms, b.transforms,
+        "the sharing probabilities change the run"
+    );
 }
 
 #[test]
@@ -85,30 +119,65 @@ fn options_beyond_the_paper_run() {
     };
     let r = register(&problem.clouds, &config, None).unwrap();
     let s = score(&r.transforms, &problem.ground_truth);
-    assert!(s.rot_deg.iter().all(|&d| d < MAX_ROTATION_DEG), "{:?}", s.rot_deg);
+    assert!(
+        s.rot_deg.iter().all(|&d| d < MAX_ROTATION_DEG),
+        "{:?}",
+        s.rot_deg
+    );
 }
 
 #[test]
 fn restarts_keep_the_lowest_cost_run() {
     let problem = synthetic::three_views(6, 4000);
-    let one = Config { seed: Some(6), generations: 6, population_size: 20, ..Config::default() };
-    let three = Config { restarts: 3, ..one.clone() };
+    let one = Config {
+        seed: Some(6),
+        generations: 6,
+        population_size: 20,
+        ..Config::default()
+    };
+    let three = Config {
+        restarts: 3,
+        ..one.clone()
+    };
     let a = register(&problem.clouds, &one, None).unwrap();
     let b = register(&problem.clouds, &three, None).unwrap();
     assert_eq!(b.evaluations, 3 * a.evaluations);
     assert_eq!(b.generations_run, 18);
     let total = |r: &mtpcr_core::Registration| r.best_costs.original.iter().sum::<f64>();
-    assert!(total(&b) <= total(&a), "restart 0 is the single run, so the best is no worse");
+    assert!(
+        total(&b) <= total(&a),
+        "restart 0 is the single run, so the best is no worse"
+    );
 }
 
 #[test]
 fn refinement_improves_precision() {
     let problem = synthetic::three_views(8, 20_000);
-    let plain = Config { seed: Some(8), generations: 30, ..Config::paper() };
-    let refined = Config { refine_iterations: 30, ..plain.clone() };
-    let a = score(&register(&problem.clouds, &plain, None).unwrap().transforms, &problem.ground_truth);
-    let b = score(&register(&problem.clouds, &refined, None).unwrap().transforms, &problem.ground_truth);
+    let plain = Config {
+        seed: Some(8),
+        generations: 30,
+        ..Config::paper()
+    };
+    let refined = Config {
+        refine_iterations: 30,
+        ..plain.clone()
+    };
+    let a = score(
+        &register(&problem.clouds, &plain, None).unwrap().transforms,
+        &problem.ground_truth,
+    );
+    let b = score(
+        &register(&problem.clouds, &refined, None)
+            .unwrap()
+            .transforms,
+        &problem.ground_truth,
+    );
     assert!(a.success, "{:?}", a.rot_deg);
-    assert!(b.err_r < a.err_r, "refined Err_R {} not below {}", b.err_r, a.err_r);
+    assert!(
+        b.err_r < a.err_r,
+        "refined Err_R {} not below {}",
+        b.err_r,
+        a.err_r
+    );
     assert!(b.rot_deg.iter().all(|&d| d < 0.2), "{:?}", b.rot_deg);
 }

@@ -77,7 +77,11 @@ impl PointCloud {
             .enumerate()
             .find(|(_, p)| p.iter().any(|v| !v.is_finite()))
         {
-            let value = p.iter().find(|v| !v.is_finite()).copied().unwrap_or(f64::NAN);
+            let value = p
+                .iter()
+                .find(|v| !v.is_finite())
+                .copied()
+                .unwrap_or(f64::NAN);
             return Err(Error::NonFiniteCoordinate {
                 cloud: name.to_string(),
                 index,
@@ -235,7 +239,11 @@ impl PointCloud {
     /// The noise protocol of the paper: centre the cloud, divide by its largest absolute
     /// coordinate, add Gaussian noise of standard deviation `sigma` to every coordinate, scale
     /// back and undo the centring.
-    pub fn with_normalized_noise<R: Rng + ?Sized>(&self, sigma: f64, rng: &mut R) -> Result<PointCloud> {
+    pub fn with_normalized_noise<R: Rng + ?Sized>(
+        &self,
+        sigma: f64,
+        rng: &mut R,
+    ) -> Result<PointCloud> {
         if !(sigma.is_finite() && sigma >= 0.0) {
             return Err(Error::InvalidInput(format!(
                 "noise sigma must be finite and >= 0, got {sigma}"
@@ -283,7 +291,13 @@ mod tests {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         PointCloud::new(
             (0..n)
-                .map(|_| [rng.random::<f64>(), rng.random::<f64>(), rng.random::<f64>()])
+                .map(|_| {
+                    [
+                        rng.random::<f64>(),
+                        rng.random::<f64>(),
+                        rng.random::<f64>(),
+                    ]
+                })
                 .collect(),
         )
     }
@@ -312,9 +326,10 @@ mod tests {
         // in the worst case; check it covers the cube (every octant has points).
         let s = c.select(&idx);
         for oct in 0..8 {
-            let hit = s.points().iter().any(|p| {
-                (0..3).all(|k| (p[k] > 0.5) == ((oct >> k) & 1 == 1))
-            });
+            let hit = s
+                .points()
+                .iter()
+                .any(|p| (0..3).all(|k| (p[k] > 0.5) == ((oct >> k) & 1 == 1)));
             assert!(hit, "octant {oct} empty");
         }
     }
@@ -328,14 +343,21 @@ mod tests {
         let e = PointCloud::new(vec![[0.0, f64::NAN, 0.0], [1.0, 1.0, 1.0]])
             .validate("cloud 2", 1)
             .unwrap_err();
-        assert!(e.to_string().contains("cloud 2") && e.to_string().contains("point 0"), "{e}");
+        assert!(
+            e.to_string().contains("cloud 2") && e.to_string().contains("point 0"),
+            "{e}"
+        );
         assert!(matches!(
             PointCloud::new(vec![[1.0, 2.0, 3.0]; 20]).validate("c", 3),
             Err(Error::DegenerateCloud { .. })
         ));
         assert!(matches!(
             random_cloud(5, 1).validate("c", 10),
-            Err(Error::TooFewPoints { points: 5, needed: 10, .. })
+            Err(Error::TooFewPoints {
+                points: 5,
+                needed: 10,
+                ..
+            })
         ));
         assert!(random_cloud(50, 1).validate("c", 10).is_ok());
     }

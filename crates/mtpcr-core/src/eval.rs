@@ -36,8 +36,14 @@ pub struct Scores {
 pub fn score(estimate: &[Transform; 3], truth: &[Transform; 3]) -> Scores {
     let rot_deg: [f64; 3] = std::array::from_fn(|i| rotation_error_deg(&estimate[i], &truth[i]));
     Scores {
-        err_r: (0..3).map(|i| rotation_error_fro(&estimate[i], &truth[i])).sum::<f64>() / 3.0,
-        err_t: (0..3).map(|i| translation_error(&estimate[i], &truth[i])).sum::<f64>() / 3.0,
+        err_r: (0..3)
+            .map(|i| rotation_error_fro(&estimate[i], &truth[i]))
+            .sum::<f64>()
+            / 3.0,
+        err_t: (0..3)
+            .map(|i| translation_error(&estimate[i], &truth[i]))
+            .sum::<f64>()
+            / 3.0,
         rot_deg,
         success: rot_deg.iter().all(|&d| d < SUCCESS_DEGREES),
     }
@@ -68,7 +74,10 @@ pub fn run_moved(
     config: &Config,
     seed: u64,
 ) -> Result<(Registration, Scores)> {
-    let extent = clouds.iter().map(PointCloud::largest_side).fold(0.0, f64::max);
+    let extent = clouds
+        .iter()
+        .map(PointCloud::largest_side)
+        .fold(0.0, f64::max);
     let motions = random_motions(seed ^ 0x6d6f_7665, extent);
     let (moved, gt) = apply_motions(clouds, truth, &motions);
     let config = Config {

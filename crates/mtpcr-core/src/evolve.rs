@@ -45,13 +45,13 @@ impl SearchBox {
 
     /// The bound rule: far outside -> redraw, slightly outside -> clip.
     fn repair(&self, x: &mut Individual, rng: &mut ChaCha8Rng) {
-        for d in 0..6 {
+        for (d, v) in x.iter_mut().enumerate() {
             let (lo, hi) = (self.lower[d], self.upper[d]);
             let slack = REDRAW_BEYOND * hi.abs();
-            if x[d] > hi + slack || x[d] < lo - slack {
-                x[d] = self.uniform(d, rng);
+            if *v > hi + slack || *v < lo - slack {
+                *v = self.uniform(d, rng);
             } else {
-                x[d] = x[d].clamp(lo, hi);
+                *v = v.clamp(lo, hi);
             }
         }
     }
@@ -208,7 +208,9 @@ fn run_mtpcr_with(
             jobs.par_iter()
                 .map(|(slot, x)| {
                     let lp = match (bests, *slot >= 3) {
-                        (Some(b), true) => loop_term(*slot - 3, &decode(x), b, config.alpha, unit_free),
+                        (Some(b), true) => {
+                            loop_term(*slot - 3, &decode(x), b, config.alpha, unit_free)
+                        }
                         _ => 0.0,
                     };
                     // The margin covers rounding in `local + lp`, so pruning never drops a child
@@ -370,7 +372,9 @@ mod tests {
             .iter()
             .map(|c| {
                 let m = c.centroid();
-                let pts = c.farthest_point_sample(300).translated([-m[0], -m[1], -m[2]]);
+                let pts = c
+                    .farthest_point_sample(300)
+                    .translated([-m[0], -m[1], -m[2]]);
                 IndexedCloud::new(pts.into_points(), 0.004, 0.015, SearchMethod::Fast)
             })
             .collect();
@@ -384,15 +388,27 @@ mod tests {
                 })
                 .collect();
             let ori: Vec<_> = (0..3)
-                .map(|j| InlierLoss { source: &clouds[j], target: &clouds[(j + 1) % 3], method: SearchMethod::Fast })
+                .map(|j| InlierLoss {
+                    source: &clouds[j],
+                    target: &clouds[(j + 1) % 3],
+                    method: SearchMethod::Fast,
+                })
                 .collect();
             let tasks = Tasks {
                 losses: [&aid[0], &aid[1], &aid[2], &ori[0], &ori[1], &ori[2]],
                 search_box: SearchBox::for_shift(0.15),
                 shift: 0.15,
             };
-            let config = Config { population_size: 30, generations: 15, refresh_loop_term: two_way, ..Config::paper() };
-            let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+            let config = Config {
+                population_size: 30,
+                generations: 15,
+                refresh_loop_term: two_way,
+                ..Config::paper()
+            };
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(2)
+                .build()
+                .unwrap();
             let mut go = |_: &Progress| ControlFlow::Continue(());
             let a = run_mtpcr_with(&tasks, &config, 3, &pool, &mut go, true);
             let b = run_mtpcr_with(&tasks, &config, 3, &pool, &mut go, false);
@@ -416,7 +432,10 @@ mod tests {
         b.repair(&mut x, &mut rng);
         assert_eq!(x[0], 180.0, "5 degrees over (< 18) is clipped");
         assert_eq!(x[1], -180.0, "10 degrees under is clipped");
-        assert!(x[2] != 180.0 && (-180.0..=180.0).contains(&x[2]), "70 over is redrawn");
+        assert!(
+            x[2] != 180.0 && (-180.0..=180.0).contains(&x[2]),
+            "70 over is redrawn"
+        );
         assert_eq!(x[3], 1.0);
         assert!(x[4] != -1.0 && (-1.0..=1.0).contains(&x[4]));
         assert_eq!(x[5], 0.5);

@@ -98,7 +98,13 @@ struct InlierGrid {
 
 impl InlierGrid {
     fn build(points: &[[f64; 3]], lo: [f64; 3], hi: [f64; 3], eps: f64) -> InlierGrid {
-        let frame = GridFrame::covering(lo, hi, eps * 1.001, eps * INLIER_CELL_PER_EPS, MAX_GRID_CELLS);
+        let frame = GridFrame::covering(
+            lo,
+            hi,
+            eps * 1.001,
+            eps * INLIER_CELL_PER_EPS,
+            MAX_GRID_CELLS,
+        );
         let h = frame.cell;
         let eps2 = eps * eps;
         // Margins make the classification robust to rounding in the cell lookup; the final
@@ -109,7 +115,9 @@ impl InlierGrid {
         let mut pairs: Vec<(u32, u32)> = Vec::new();
         for (pi, p) in points.iter().enumerate() {
             let range: [(usize, usize); 3] = std::array::from_fn(|k| {
-                let a = ((p[k] - eps - frame.origin[k]) * frame.inv_cell).floor().max(0.0) as usize;
+                let a = ((p[k] - eps - frame.origin[k]) * frame.inv_cell)
+                    .floor()
+                    .max(0.0) as usize;
                 let b = ((p[k] + eps - frame.origin[k]) * frame.inv_cell).floor() as usize;
                 (a, b.min(frame.dims[k] - 1))
             });
@@ -190,7 +198,9 @@ impl InlierGrid {
             v => {
                 let k = (v - 2) as usize;
                 let (s, e) = (self.starts[k] as usize, self.starts[k + 1] as usize);
-                self.candidates[s..e].iter().any(|q| dist2(p, q) <= self.eps2)
+                self.candidates[s..e]
+                    .iter()
+                    .any(|q| dist2(p, q) <= self.eps2)
             }
         }
     }
@@ -211,7 +221,13 @@ struct DistanceField {
 }
 
 impl DistanceField {
-    fn build(tree: &ImmutableKdTree<f64, 3>, lo: [f64; 3], hi: [f64; 3], spacing: f64, cap: f64) -> DistanceField {
+    fn build(
+        tree: &ImmutableKdTree<f64, 3>,
+        lo: [f64; 3],
+        hi: [f64; 3],
+        spacing: f64,
+        cap: f64,
+    ) -> DistanceField {
         // Nodes reach `cap` beyond the bounds, so everything outside the field is at least
         // `cap` away from every point.
         let frame = GridFrame::covering(lo, hi, cap + spacing, spacing, MAX_FIELD_NODES);
@@ -229,7 +245,10 @@ impl DistanceField {
                     frame.origin[1] + j as f64 * h,
                     frame.origin[2] + k as f64 * h,
                 ];
-                let nn = tree.query(&q).nearest_one::<SquaredEuclidean<f64>>().execute();
+                let nn = tree
+                    .query(&q)
+                    .nearest_one::<SquaredEuclidean<f64>>()
+                    .execute();
                 nn.distance.sqrt().min(cap) as f32
             })
             .collect();
@@ -291,7 +310,11 @@ const CHUNK: usize = 64;
 
 /// Counts the points that pass `hit`; gives up (`None`) once `needed` is out of reach.
 #[inline(always)]
-fn count_chunked(points: &[[f64; 3]], needed: usize, hit: impl Fn(&[f64; 3]) -> bool) -> Option<usize> {
+fn count_chunked(
+    points: &[[f64; 3]],
+    needed: usize,
+    hit: impl Fn(&[f64; 3]) -> bool,
+) -> Option<usize> {
     let mut count = 0usize;
     let mut left = points.len();
     for chunk in points.chunks(CHUNK) {
@@ -350,7 +373,13 @@ impl IndexedCloud {
             SearchMethod::Exact => (None, None),
             SearchMethod::Fast => (
                 Some(InlierGrid::build(&points, lo, hi, eps)),
-                Some(DistanceField::build(&tree, lo, hi, eps * FIELD_NODE_PER_EPS, cap)),
+                Some(DistanceField::build(
+                    &tree,
+                    lo,
+                    hi,
+                    eps * FIELD_NODE_PER_EPS,
+                    cap,
+                )),
             ),
         };
         IndexedCloud {
@@ -456,7 +485,9 @@ impl IndexedCloud {
     /// The largest possible difference between the fast and the exact capped distance of one
     /// point (one node diagonal of the field), or 0 without a field.
     pub fn field_error_bound(&self) -> f64 {
-        self.field.as_ref().map_or(0.0, |f| f.frame.cell * 3f64.sqrt())
+        self.field
+            .as_ref()
+            .map_or(0.0, |f| f.frame.cell * 3f64.sqrt())
     }
 }
 
@@ -466,7 +497,10 @@ fn morton_sorted(mut points: Vec<[f64; 3]>) -> Vec<[f64; 3]> {
         return points;
     }
     let (lo, hi) = crate::cloud::PointCloud::new(points.clone()).bounds();
-    let ext = (0..3).map(|k| hi[k] - lo[k]).fold(0.0, f64::max).max(f64::MIN_POSITIVE);
+    let ext = (0..3)
+        .map(|k| hi[k] - lo[k])
+        .fold(0.0, f64::max)
+        .max(f64::MIN_POSITIVE);
     let scale = 1023.0 / ext;
     let spread = |mut v: u64| {
         v &= 0x3ff;
@@ -513,7 +547,9 @@ pub struct InlierLoss<'a> {
 impl InlierLoss<'_> {
     /// `(n1, n2)` for `t`.
     pub fn inlier_counts(&self, t: &Rigid) -> (usize, usize) {
-        let n1 = self.target.count_within(self.source.points(), t, self.method, 0);
+        let n1 = self
+            .target
+            .count_within(self.source.points(), t, self.method, 0);
         let n2 = self
             .source
             .count_within(self.target.points(), &t.inverse(), self.method, 0);
@@ -548,9 +584,12 @@ impl Loss for InlierLoss<'_> {
             k
         };
         let nt = self.target.points().len();
-        let n1 = self
-            .target
-            .count_within(self.source.points(), t, self.method, needed.saturating_sub(nt))?;
+        let n1 = self.target.count_within(
+            self.source.points(),
+            t,
+            self.method,
+            needed.saturating_sub(nt),
+        )?;
         let n2 = self.source.count_within(
             self.target.points(),
             &t.inverse(),
@@ -580,9 +619,14 @@ impl Loss for CappedDistanceLoss<'_> {
         let ns = self.source.points().len() as f64;
         if self.two_way {
             let n = ns + self.target.points().len() as f64;
-            let forward =
-                self.target
-                    .sum_capped_distance(self.source.points(), t, self.method, 0.0, n, limit)?;
+            let forward = self.target.sum_capped_distance(
+                self.source.points(),
+                t,
+                self.method,
+                0.0,
+                n,
+                limit,
+            )?;
             let both = self.source.sum_capped_distance(
                 self.target.points(),
                 &t.inverse(),
@@ -593,9 +637,14 @@ impl Loss for CappedDistanceLoss<'_> {
             )?;
             Some(both / n)
         } else {
-            let forward =
-                self.target
-                    .sum_capped_distance(self.source.points(), t, self.method, 0.0, ns, limit)?;
+            let forward = self.target.sum_capped_distance(
+                self.source.points(),
+                t,
+                self.method,
+                0.0,
+                ns,
+                limit,
+            )?;
             Some(forward / ns)
         }
     }
@@ -676,7 +725,10 @@ mod tests {
             worst = worst.max(d);
         }
         assert!(worst <= bound, "{worst} > {bound}");
-        assert_eq!(c.capped_distance(&[50.0, 0.0, 0.0], SearchMethod::Fast), 0.2);
+        assert_eq!(
+            c.capped_distance(&[50.0, 0.0, 0.0], SearchMethod::Fast),
+            0.2
+        );
     }
 
     #[test]
@@ -698,15 +750,38 @@ mod tests {
             } else {
                 Rigid::from_matrix(&random_rigid(&mut rng, 0.5))
             };
-            let fast = InlierLoss { source: &a, target: &b, method: SearchMethod::Fast };
-            let exact = InlierLoss { method: SearchMethod::Exact, ..fast };
+            let fast = InlierLoss {
+                source: &a,
+                target: &b,
+                method: SearchMethod::Fast,
+            };
+            let exact = InlierLoss {
+                method: SearchMethod::Exact,
+                ..fast
+            };
             assert_eq!(fast.inlier_counts(&t), exact.inlier_counts(&t));
-            let fa = CappedDistanceLoss { source: &a, target: &b, method: SearchMethod::Fast, two_way: trial % 3 == 0 };
-            let ex = CappedDistanceLoss { method: SearchMethod::Exact, ..fa };
-            assert!((fa.evaluate(&t) - ex.evaluate(&t)).abs() <= b.field_error_bound().max(a.field_error_bound()));
+            let fa = CappedDistanceLoss {
+                source: &a,
+                target: &b,
+                method: SearchMethod::Fast,
+                two_way: trial % 3 == 0,
+            };
+            let ex = CappedDistanceLoss {
+                method: SearchMethod::Exact,
+                ..fa
+            };
+            assert!(
+                (fa.evaluate(&t) - ex.evaluate(&t)).abs()
+                    <= b.field_error_bound().max(a.field_error_bound())
+            );
         }
         let ident = Rigid::from_individual(&[0.0; 6]);
-        let (n1, _) = InlierLoss { source: &a, target: &a, method: SearchMethod::Fast }.inlier_counts(&ident);
+        let (n1, _) = InlierLoss {
+            source: &a,
+            target: &a,
+            method: SearchMethod::Fast,
+        }
+        .inlier_counts(&ident);
         assert_eq!(n1, 2000, "a cloud is all inliers of itself");
     }
 
@@ -724,8 +799,17 @@ mod tests {
                 rng.random_range(-0.1..0.1),
                 0.0,
             ]);
-            let inl = InlierLoss { source: &a, target: &b, method: SearchMethod::Fast };
-            let aid = CappedDistanceLoss { source: &a, target: &b, method: SearchMethod::Fast, two_way: trial % 2 == 0 };
+            let inl = InlierLoss {
+                source: &a,
+                target: &b,
+                method: SearchMethod::Fast,
+            };
+            let aid = CappedDistanceLoss {
+                source: &a,
+                target: &b,
+                method: SearchMethod::Fast,
+                two_way: trial % 2 == 0,
+            };
             for loss in [&inl as &dyn Loss, &aid as &dyn Loss] {
                 let full = loss.evaluate(&t);
                 for limit in [full * 0.5, full, full + 1e-12, full * 1.5, 0.0] {

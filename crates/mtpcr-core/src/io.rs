@@ -18,7 +18,14 @@ use std::io::{BufReader, BufWriter, Cursor, Read, Write};
 use std::path::{Path, PathBuf};
 
 /// Header keywords of the PLY format; any other header line is skipped.
-const PLY_KEYWORDS: [&str; 6] = ["format", "comment", "obj_info", "element", "property", "end_header"];
+const PLY_KEYWORDS: [&str; 6] = [
+    "format",
+    "comment",
+    "obj_info",
+    "element",
+    "property",
+    "end_header",
+];
 
 #[derive(Default)]
 struct Vertex {
@@ -44,7 +51,11 @@ impl PropertyAccess for Vertex {
     fn new() -> Self {
         Vertex::default()
     }
-    fn set_property(&mut self, name: &str, property: Property) -> ply_rs_bw::ply::PropertyAccessResult {
+    fn set_property(
+        &mut self,
+        name: &str,
+        property: Property,
+    ) -> ply_rs_bw::ply::PropertyAccessResult {
         let slot = match name {
             "x" => 0,
             "y" => 1,
@@ -135,7 +146,10 @@ pub fn read_ply_bytes(path: &Path, bytes: &[u8]) -> Result<PointCloud> {
         .read_header(&mut reader)
         .map_err(|e| Error::malformed(path, format!("bad PLY header: {e}")))?;
     let Some(vertex_def) = header.elements.get("vertex") else {
-        return Err(Error::malformed(path, "the PLY file has no `vertex` element"));
+        return Err(Error::malformed(
+            path,
+            "the PLY file has no `vertex` element",
+        ));
     };
     for axis in ["x", "y", "z"] {
         match vertex_def.properties.get(axis) {
@@ -161,20 +175,25 @@ pub fn read_ply_bytes(path: &Path, bytes: &[u8]) -> Result<PointCloud> {
     for (name, def) in &header.elements {
         let elements = parser
             .read_payload_for_element(&mut reader, def, &header)
-            .map_err(|e| {
-                Error::malformed(path, format!("bad data in element `{name}`: {e}"))
-            })?;
+            .map_err(|e| Error::malformed(path, format!("bad data in element `{name}`: {e}")))?;
         if name == "vertex" {
             let points = elements.into_iter().map(|v| v.xyz).collect();
             return Ok(PointCloud::new(points));
         }
     }
-    Err(Error::malformed(path, "the PLY file has no `vertex` element"))
+    Err(Error::malformed(
+        path,
+        "the PLY file has no `vertex` element",
+    ))
 }
 
 /// Writes points (and optional per-point RGB colours) as a binary little-endian PLY file with
 /// double coordinates. The file is created or truncated.
-pub fn write_ply(path: impl AsRef<Path>, points: &[[f64; 3]], colors: Option<&[[u8; 3]]>) -> Result<()> {
+pub fn write_ply(
+    path: impl AsRef<Path>,
+    points: &[[f64; 3]],
+    colors: Option<&[[u8; 3]]>,
+) -> Result<()> {
     let path = path.as_ref();
     if let Some(c) = colors {
         if c.len() != points.len() {
@@ -219,7 +238,7 @@ pub fn write_ply(path: impl AsRef<Path>, points: &[[f64; 3]], colors: Option<&[[
     writer
         .write_header(&mut out, &header)
         .and_then(|_| writer.write_payload_of_element(&mut out, &elements, &vertex, &header))
-        .map_err(|e| Error::io(path, e.into()))?;
+        .map_err(|e| Error::io(path, e))?;
     out.flush().map_err(|e| Error::io(path, e))
 }
 
@@ -271,7 +290,10 @@ impl Problem {
         for (k, p) in file.poses.iter().enumerate() {
             let m = Transform::from_fn(|i, j| p[i][j]);
             if !is_rigid(&m, 1e-5) {
-                return Err(Error::malformed(path, format!("pose {} is not a rigid transform", k + 1)));
+                return Err(Error::malformed(
+                    path,
+                    format!("pose {} is not a rigid transform", k + 1),
+                ));
             }
             poses[k] = m;
         }
@@ -343,7 +365,14 @@ mod tests {
         let p = tmp("stanford.ply");
         std::fs::write(&p, text).unwrap();
         let c = read_ply(&p).unwrap();
-        assert_eq!(c.points(), &[[0.5, 1.0, 2.0], [3.0, 4.0, 5.0], [-1e-3f32 as f64, 0.0, 7.25]]);
+        assert_eq!(
+            c.points(),
+            &[
+                [0.5, 1.0, 2.0],
+                [3.0, 4.0, 5.0],
+                [-1e-3f32 as f64, 0.0, 7.25]
+            ]
+        );
     }
 
     #[test]
@@ -367,7 +396,10 @@ mod tests {
     #[test]
     fn errors_name_the_file_and_the_problem() {
         let e = read_ply("/nonexistent/nowhere.ply").unwrap_err();
-        assert!(matches!(e, Error::Io { .. }) && e.to_string().contains("nowhere.ply"), "{e}");
+        assert!(
+            matches!(e, Error::Io { .. }) && e.to_string().contains("nowhere.ply"),
+            "{e}"
+        );
         let cases: [(&str, &[u8], &str); 5] = [
             ("notply.ply", b"hello\nworld\n", "not a PLY file"),
             ("noend.ply", b"ply\nformat ascii 1.0\nelement vertex 1\n", "end_header"),

@@ -37,5 +37,7 @@ pub use cloud::{PointCloud, Sampling};
 pub use error::{Error, Result};
 pub use evolve::TASK_NAMES;
 pub use fitness::SearchMethod;
-pub use registration::{register, BestCosts, Config, PreparedProblem, Progress, Registration};
+pub use registration::{
+    register, BestCosts, Config, Observer, PreparedProblem, Progress, Registration,
+};
 pub use se3::Transform;

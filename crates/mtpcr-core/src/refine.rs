@@ -13,6 +13,9 @@ const MAX_SOURCE_POINTS: usize = 8000;
 /// Neighbours whose covariance gives a point's normal.
 const NORMAL_NEIGHBOURS: usize = 12;
 
+/// A correspondence in cloud 1's frame: moved source point, target point, target normal.
+type Match = ([f64; 3], [f64; 3], [f64; 3]);
+
 /// One cloud at full resolution (centred like its sample), ready to be a refinement target
 /// or source.
 #[derive(Debug)]
@@ -35,7 +38,10 @@ impl RefineCloud {
             .par_iter()
             .with_min_len(512)
             .map(|p| {
-                let nn = tree.query(p).nearest_n::<SquaredEuclidean<f64>>(k).execute();
+                let nn = tree
+                    .query(p)
+                    .nearest_n::<SquaredEuclidean<f64>>(k)
+                    .execute();
                 let mut mean = Vector3::zeros();
                 for r in &nn {
                     mean += Vector3::from(points[r.item as usize]);
@@ -74,7 +80,11 @@ pub(crate) fn refine_loop(
 ) -> [Rigid; 3] {
     const DIRECTIONS: [(usize, usize); 6] = [(0, 1), (1, 0), (1, 2), (2, 1), (2, 0), (0, 2)];
     for it in 0..iterations {
-        let frac = if iterations > 1 { it as f64 / (iterations - 1) as f64 } else { 1.0 };
+        let frac = if iterations > 1 {
+            it as f64 / (iterations - 1) as f64
+        } else {
+            1.0
+        };
         let max_d2 = (eps * (3.0 - 2.0 * frac)).powi(2);
         // Normal equations of the 12 unknowns (rotation, translation of clouds 2 and 3).
         let mut h = nalgebra::SMatrix::<f64, 12, 12>::zeros();
@@ -83,21 +93,29 @@ pub(crate) fn refine_loop(
         for &(i, j) in &DIRECTIONS {
             let to_j = compose(&poses[j].inverse(), &poses[i]);
             let rj = &poses[j].r;
-            let pairs: Vec<Option<([f64; 3], [f64; 3], [f64; 3])>> = pool.install(|| {
+            let pairs: Vec<Option<Match>> = pool.install(|| {
                 clouds[i]
                     .sources
                     .par_iter()
                     .with_min_len(256)
                     .map(|p| {
                         let q = to_j.apply(p);
-                        let nn = clouds[j].tree.query(&q).nearest_one::<SquaredEuclidean<f64>>().execute();
+                        let nn = clouds[j]
+                            .tree
+                            .query(&q)
+                            .nearest_one::<SquaredEuclidean<f64>>()
+                            .execute();
                         (nn.distance <= max_d2).then(|| {
                             let m = nn.item as usize;
                             let n = clouds[j].normals[m];
                             let n_world = std::array::from_fn(|a| {
                                 rj[a][0] * n[0] + rj[a][1] * n[1] + rj[a][2] * n[2]
                             });
-                            (poses[i].apply(p), poses[j].apply(&clouds[j].points[m]), n_world)
+                            (
+                                poses[i].apply(p),
+                                poses[j].apply(&clouds[j].points[m]),
+                                n_world,
+                            )
                         })
                     })
                     .collect()
@@ -116,7 +134,8 @@ pub(crate) fn refine_loop(
                     let o = 6 * (k - 1);
                     let skew = p.cross_matrix();
                     jac.fixed_view_mut::<3, 3>(0, o).copy_from(&(-skew * sign));
-                    jac.fixed_view_mut::<3, 3>(0, o + 3).copy_from(&(Matrix3::identity() * sign));
+                    jac.fixed_view_mut::<3, 3>(0, o + 3)
+                        .copy_from(&(Matrix3::identity() * sign));
                 }
                 let row = n.transpose() * jac;
                 h += row.transpose() * row;
@@ -126,8 +145,10 @@ pub(crate) fn refine_loop(
         if matched < 12 {
             break;
         }
-        let Some(delta) = h.lu().solve(&(-g)) else { break };
-        for k in 1..3 {
+        let Some(delta) = h.lu().solve(&(-g)) else {
+            break;
+        };
+        for (k, pose) in poses.iter_mut().enumerate().skip(1) {
             let o = 6 * (k - 1);
             let w = Vector3::new(delta[o], delta[o + 1], delta[o + 2]);
             let v = Vector3::new(delta[o + 3], delta[o + 4], delta[o + 5]);
@@ -136,7 +157,7 @@ pub(crate) fn refine_loop(
                 r: std::array::from_fn(|a| std::array::from_fn(|b| rot[(a, b)])),
                 t: [v[0], v[1], v[2]],
             };
-            poses[k] = compose(&step, &poses[k]);
+            *pose = compose(&step, pose);
         }
         if delta.norm() < 1e-12 {
             break;
@@ -173,14 +194,20 @@ mod tests {
             .collect();
         // Three overlapping strips of one surface, all in one frame (true poses = identity).
         let strip = |lo: f64, hi: f64| -> Vec<[f64; 3]> {
-            pts.iter().filter(|p| p[0] >= lo && p[0] <= hi).copied().collect()
+            pts.iter()
+                .filter(|p| p[0] >= lo && p[0] <= hi)
+                .copied()
+                .collect()
         };
         let clouds = [
             RefineCloud::new(strip(-1.0, 0.3)),
             RefineCloud::new(strip(-0.3, 1.0)),
             RefineCloud::new(strip(-0.6, 0.6)),
         ];
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(2)
+            .build()
+            .unwrap();
         let start = [
             Rigid::from_individual(&[0.0; 6]),
             Rigid::from_individual(&[1.5, -1.0, 2.0, 0.01, -0.01, 0.005]),
@@ -192,7 +219,14 @@ mod tests {
             assert!(rotation_error_deg(&pose.to_matrix(), &ident) < 0.05);
             assert!(translation_error(&pose.to_matrix(), &ident) < 1e-3);
         }
-        let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
-        assert_eq!(refine_loop(&clouds, start, 0.02, 40, &one), est, "thread count changes nothing");
+        let one = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        assert_eq!(
+            refine_loop(&clouds, start, 0.02, 40, &one),
+            est,
+            "thread count changes nothing"
+        );
     }
 }

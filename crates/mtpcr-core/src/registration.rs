@@ -137,9 +137,15 @@ impl Config {
                 format!("must be in (0, 2], got {}", self.scale_factor),
             ));
         }
-        for (field, v) in [("sbx_eta_start", self.sbx_eta_start), ("sbx_eta_end", self.sbx_eta_end)] {
+        for (field, v) in [
+            ("sbx_eta_start", self.sbx_eta_start),
+            ("sbx_eta_end", self.sbx_eta_end),
+        ] {
             if !(v.is_finite() && (0.0..=1000.0).contains(&v)) {
-                return Err(Error::config(field, format!("must be in [0, 1000], got {v}")));
+                return Err(Error::config(
+                    field,
+                    format!("must be in [0, 1000], got {v}"),
+                ));
             }
         }
         if !(self.alpha.is_finite() && self.alpha >= 0.0) {
@@ -169,7 +175,10 @@ impl Config {
         if self.num_threads > 4096 {
             return Err(Error::config(
                 "num_threads",
-                format!("must be at most 4096 (0 = all cores), got {}", self.num_threads),
+                format!(
+                    "must be at most 4096 (0 = all cores), got {}",
+                    self.num_threads
+                ),
             ));
         }
         Ok(())
@@ -199,6 +208,9 @@ pub struct Progress {
     /// Loss evaluations so far.
     pub evaluations: usize,
 }
+
+/// A per-generation callback: return `ControlFlow::Break(())` to stop the run.
+pub type Observer<'a> = &'a mut dyn FnMut(&Progress) -> ControlFlow<()>;
 
 /// Best final costs of the six tasks.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
@@ -315,7 +327,10 @@ impl PreparedProblem {
             .sum::<f64>()
             / 3.0;
         let eps = std::f64::consts::FRAC_1_SQRT_2 * d;
-        let shift = centred.iter().map(PointCloud::largest_side).fold(0.0, f64::max);
+        let shift = centred
+            .iter()
+            .map(PointCloud::largest_side)
+            .fold(0.0, f64::max);
         if !(eps > 0.0 && shift > 0.0) {
             return Err(Error::DegenerateCloud {
                 cloud: "the downsampled clouds".to_string(),
@@ -410,8 +425,8 @@ impl PreparedProblem {
         let id = Transform::identity();
         // Each tree leaves out one pair; poses W_k map cloud k into cloud 1.
         let trees: [[Transform; 3]; 3] = [
-            [id, m[2] * m[1], m[2]],                      // without T12
-            [id, invert_rigid(&m[0]), m[2]],              // without T23
+            [id, m[2] * m[1], m[2]],                                 // without T12
+            [id, invert_rigid(&m[0]), m[2]],                         // without T23
             [id, invert_rigid(&m[0]), invert_rigid(&(m[1] * m[0]))], // without T31
         ];
         let loss = |w: &[Transform; 3]| -> f64 {
@@ -452,7 +467,7 @@ impl PreparedProblem {
     pub fn register(
         &self,
         config: &Config,
-        observer: Option<&mut dyn FnMut(&Progress) -> ControlFlow<()>>,
+        observer: Option<Observer<'_>>,
     ) -> Result<Registration> {
         let start = Instant::now();
         config.validate()?;
@@ -513,7 +528,11 @@ impl PreparedProblem {
         let mut completed = true;
         for r in 0..config.restarts {
             // Restart 0 uses the seed itself, so one restart is exactly the paper's run.
-            let run_seed = if r == 0 { seed } else { derive_seed(seed, r as u64) };
+            let run_seed = if r == 0 {
+                seed
+            } else {
+                derive_seed(seed, r as u64)
+            };
             let offset = generations_run;
             let done_before = evaluations;
             let mut forward = |p: &Progress| {
@@ -605,7 +624,7 @@ fn thread_pool(num_threads: usize) -> Result<rayon::ThreadPool> {
 pub fn register(
     clouds: &[PointCloud; 3],
     config: &Config,
-    observer: Option<&mut dyn FnMut(&Progress) -> ControlFlow<()>>,
+    observer: Option<Observer<'_>>,
 ) -> Result<Registration> {
     let start = Instant::now();
     let mut config = config.clone();

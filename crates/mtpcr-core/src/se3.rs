@@ -143,8 +143,8 @@ pub fn is_rigid(t: &Transform, tol: f64) -> bool {
     }
     let r: Matrix3<f64> = t.fixed_view::<3, 3>(0, 0).into_owned();
     let orth = (r.transpose() * r - Matrix3::identity()).norm();
-    let last = (t[(3, 0)].abs() + t[(3, 1)].abs() + t[(3, 2)].abs() + (t[(3, 3)] - 1.0).abs())
-        .max(0.0);
+    let last =
+        (t[(3, 0)].abs() + t[(3, 1)].abs() + t[(3, 2)].abs() + (t[(3, 3)] - 1.0).abs()).max(0.0);
     orth <= tol && (r.determinant() - 1.0).abs() <= tol && last <= tol
 }
 

@@ -3,7 +3,7 @@
 //! Used by the demo and by the tests that must run without data.
 
 use crate::cloud::PointCloud;
-use crate::se3::{random_rigid, invert_rigid, Transform};
+use crate::se3::{invert_rigid, random_rigid, Transform};
 use rand::{Rng, RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
