@@ -38,6 +38,6 @@ pub use error::{Error, Result};
 pub use evolve::TASK_NAMES;
 pub use fitness::SearchMethod;
 pub use registration::{
-    register, BestCosts, Config, Observer, PreparedProblem, Progress, Registration,
+    register, BestCosts, Config, Method, Observer, PreparedProblem, Progress, Registration,
 };
 pub use se3::Transform;

@@ -11,6 +11,18 @@ use rand_chacha::ChaCha8Rng;
 use std::ops::ControlFlow;
 use std::time::Instant;
 
+/// The evolutionary algorithm of a run. All share the six task losses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Method {
+    /// MTPCR: six populations with bi-channel knowledge sharing (the paper's method).
+    Mtpcr,
+    /// MFEA (Gupta et al. 2016): one population over the six tasks (baseline).
+    Mfea,
+    /// G-MFEA (Ding et al. 2019): MFEA with decision-variable translation (baseline).
+    Gmfea,
+}
+
 /// Fewest points a cloud may have (and fewest kept by downsampling).
 pub const MIN_POINTS: usize = 10;
 
@@ -20,6 +32,9 @@ pub const MIN_POINTS: usize = 10;
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Config {
+    /// The evolutionary algorithm: `mtpcr` (the paper's method), or the baselines `mfea`,
+    /// `gmfea`. Paper: mtpcr.
+    pub method: Method,
     /// Individuals per population (`n`; six populations). At least 4. Paper: 100.
     pub population_size: usize,
     /// Generations after the initial one (`G`). Paper: 60.
@@ -73,6 +88,7 @@ impl Config {
     /// The authors' reference setting (the paper's Section IV-C).
     pub fn paper() -> Config {
         Config {
+            method: Method::Mtpcr,
             population_size: 100,
             generations: 60,
             sample_ratio: 0.05,
@@ -543,7 +559,15 @@ impl PreparedProblem {
                     ..p.clone()
                 })
             };
-            let out = evolve::run_mtpcr(&tasks, config, run_seed, &pool, &mut forward);
+            let out = match config.method {
+                Method::Mtpcr => evolve::run_mtpcr(&tasks, config, run_seed, &pool, &mut forward),
+                Method::Mfea | Method::Gmfea => {
+                    return Err(Error::config(
+                        "method",
+                        "the MFEA and G-MFEA baselines are not available yet; use `mtpcr`",
+                    ))
+                }
+            };
             evaluations += out.evaluations;
             generations_run += out.generations_run;
             let stopped = !out.completed;
