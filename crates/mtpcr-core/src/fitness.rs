@@ -93,7 +93,30 @@ struct InlierGrid {
     /// Candidate list `k` is `candidates[starts[k]..starts[k + 1]]`.
     starts: Vec<u32>,
     candidates: Vec<[f64; 3]>,
+    /// Per mixed cell `k`, one bit per sub-cell of a 4x4x4 split: sub-cells wholly within eps
+    /// of one candidate (`full`) and sub-cells out of reach of every candidate (`empty`).
+    /// Only the remaining sub-cells test candidates.
+    sub_full: Vec<u64>,
+    sub_empty: Vec<u64>,
     eps2: f64,
+}
+
+/// Sub-cells per cell side in the inlier grid's mixed cells (4 -> 64 bits).
+const SUB: usize = 4;
+
+/// Squared distances from `p` to the nearest and the farthest point of the box `[b0, b0 + h]^3`.
+#[inline]
+fn box_distances2(p: &[f64; 3], b0: [f64; 3], h: f64) -> (f64, f64) {
+    let mut near = 0.0;
+    let mut far = 0.0;
+    for a in 0..3 {
+        let b1 = b0[a] + h;
+        let m = (b0[a] - p[a]).max(0.0).max(p[a] - b1);
+        near += m * m;
+        let f = (p[a] - b0[a]).abs().max((p[a] - b1).abs());
+        far += f * f;
+    }
+    (near, far)
 }
 
 impl InlierGrid {
@@ -125,18 +148,8 @@ impl InlierGrid {
                 for j in range[1].0..=range[1].1 {
                     for i in range[0].0..=range[0].1 {
                         let idx = [i, j, k];
-                        let mut dmin = 0.0;
-                        let mut dmax = 0.0;
-                        for a in 0..3 {
-                            let b0 = frame.origin[a] + idx[a] as f64 * h;
-                            let b1 = b0 + h;
-                            let below = (b0 - p[a]).max(0.0);
-                            let above = (p[a] - b1).max(0.0);
-                            let m = below.max(above);
-                            dmin += m * m;
-                            let far = (p[a] - b0).abs().max((p[a] - b1).abs());
-                            dmax += far * far;
-                        }
+                        let b0 = std::array::from_fn(|a| frame.origin[a] + idx[a] as f64 * h);
+                        let (dmin, dmax) = box_distances2(p, b0, h);
                         let c = frame.linear(i, j, k);
                         if dmax <= full_below {
                             cells[c] = FULL;
@@ -150,6 +163,9 @@ impl InlierGrid {
         pairs.sort_unstable();
         let mut starts = vec![0u32];
         let mut candidates = Vec::new();
+        let mut sub_full = Vec::new();
+        let mut sub_empty = Vec::new();
+        let hs = h / SUB as f64;
         let mut g = 0;
         while g < pairs.len() {
             let c = pairs[g].0;
@@ -159,8 +175,35 @@ impl InlierGrid {
             }
             if cells[c as usize] != FULL {
                 cells[c as usize] = 2 + (starts.len() as u32 - 1);
+                let first = candidates.len();
                 candidates.extend(pairs[g..e].iter().map(|&(_, pi)| points[pi as usize]));
                 starts.push(candidates.len() as u32);
+                let cu = c as usize;
+                let cell_idx = [
+                    cu % frame.dims[0],
+                    (cu / frame.dims[0]) % frame.dims[1],
+                    cu / (frame.dims[0] * frame.dims[1]),
+                ];
+                let (mut full, mut empty) = (0u64, 0u64);
+                for bit in 0..SUB * SUB * SUB {
+                    let sub = [bit % SUB, (bit / SUB) % SUB, bit / (SUB * SUB)];
+                    let b0 = std::array::from_fn(|a| {
+                        frame.origin[a] + cell_idx[a] as f64 * h + sub[a] as f64 * hs
+                    });
+                    let mut any_near = false;
+                    for q in &candidates[first..] {
+                        let (dmin, dmax) = box_distances2(q, b0, hs);
+                        if dmax <= full_below {
+                            full |= 1 << bit;
+                        }
+                        any_near |= dmin <= near_below;
+                    }
+                    if !any_near {
+                        empty |= 1 << bit;
+                    }
+                }
+                sub_full.push(full);
+                sub_empty.push(empty);
             }
             g = e;
         }
@@ -171,6 +214,8 @@ impl InlierGrid {
             cells,
             starts,
             candidates,
+            sub_full,
+            sub_empty,
             eps2,
         }
     }
@@ -197,6 +242,14 @@ impl InlierGrid {
             FULL => true,
             v => {
                 let k = (v - 2) as usize;
+                let sub = |f: f64| (((f - f.floor()) * SUB as f64) as usize).min(SUB - 1);
+                let bit = 1u64 << (sub(fx) + SUB * (sub(fy) + SUB * sub(fz)));
+                if self.sub_full[k] & bit != 0 {
+                    return true;
+                }
+                if self.sub_empty[k] & bit != 0 {
+                    return false;
+                }
                 let (s, e) = (self.starts[k] as usize, self.starts[k + 1] as usize);
                 self.candidates[s..e]
                     .iter()
@@ -206,7 +259,10 @@ impl InlierGrid {
     }
 
     fn memory_bytes(&self) -> usize {
-        self.cells.len() * 4 + self.starts.len() * 4 + self.candidates.len() * 24
+        self.cells.len() * 4
+            + self.starts.len() * 4
+            + self.candidates.len() * 24
+            + self.sub_full.len() * 16
     }
 }
 

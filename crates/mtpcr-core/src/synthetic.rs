@@ -41,29 +41,46 @@ fn unit_vector<R: Rng + ?Sized>(rng: &mut R) -> [f64; 3] {
 }
 
 /// Three views of about `points_per_view` points each of a seeded shape; the views overlap
-/// pairwise by roughly half.
+/// pairwise by about 40 to 70 %.
 pub fn three_views(seed: u64, points_per_view: usize) -> SyntheticProblem {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let bumps: Vec<Bump> = (0..12)
-        .map(|_| Bump {
-            centre: unit_vector(&mut rng),
-            height: rng.random_range(-0.25..0.45),
-            width: rng.random_range(0.2..0.5),
+    // A few large lobes and many small bumps: features at several scales, as real objects have.
+    // Six narrow protrusions (ears, a nose: something every view sees), a few large lobes
+    // and many small bumps: features at several scales, as real objects have.
+    let bumps: Vec<Bump> = (0..66)
+        .map(|i| match i {
+            0..6 => Bump {
+                centre: unit_vector(&mut rng),
+                height: rng.random_range(0.4..0.7),
+                width: rng.random_range(0.15..0.25),
+            },
+            6..14 => Bump {
+                centre: unit_vector(&mut rng),
+                height: rng.random_range(-0.2..0.45),
+                width: rng.random_range(0.25..0.5),
+            },
+            _ => Bump {
+                centre: unit_vector(&mut rng),
+                height: rng.random_range(-0.08..0.12),
+                width: rng.random_range(0.08..0.2),
+            },
         })
         .collect();
-    let axes = [1.0, 0.8, 0.62];
-    // An egg (thicker towards +x, skewed in y-z) with bumps: no symmetry a view could hide in.
+    let axes = [1.0, 0.6, 0.42];
+    // An egg thicker towards +x and +y, skewed in x-z, with bumps: no rotation maps it onto
+    // itself, so no view can hide in a symmetry.
     let surface = |u: [f64; 3]| -> [f64; 3] {
-        let mut r = 1.0 + 0.3 * u[0] + 0.2 * u[1] * u[2];
+        let mut r = 1.0 + 0.3 * u[0] + 0.2 * u[1] + 0.15 * u[0] * u[2];
         for b in &bumps {
             let d2: f64 = (0..3).map(|k| (u[k] - b.centre[k]).powi(2)).sum();
             r += b.height * (-d2 / (b.width * b.width)).exp();
         }
         std::array::from_fn(|k| 0.5 * SHAPE_SIZE * axes[k] * r * u[k] / 1.3)
     };
-    // Viewing directions about 120 degrees apart around a tilted axis.
+    // Viewing directions about 60 degrees apart around a tilted axis (views 1 and 3 are
+    // about 120 degrees apart and overlap least).
     let views: [[f64; 3]; 3] = std::array::from_fn(|i| {
-        let a = (i as f64 * 120.0 + rng.random_range(-10.0..10.0)).to_radians();
+        let a = (i as f64 * 60.0 + rng.random_range(-8.0..8.0)).to_radians();
         let e: f64 = rng.random_range(-0.3..0.3);
         [a.cos() * e.cos(), e.sin(), a.sin() * e.cos()]
     });

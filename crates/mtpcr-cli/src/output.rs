@@ -1,0 +1,286 @@
+//! The results folder of `mtpcr register`: choosing and guarding it, and writing its files.
+
+use crate::error::{CliResult, Failure};
+use crate::plots;
+use mtpcr_core::io::{matrix_rows, write_ply};
+use mtpcr_core::Transform;
+use mtpcr_core::{Config, PointCloud, Registration, TASK_NAMES};
+use std::path::{Path, PathBuf};
+
+/// The files a run writes, in the order they are written.
+pub const OUTPUT_FILES: [&str; 6] = [
+    "result.json",
+    "config.toml",
+    "transforms.txt",
+    "merged.ply",
+    "convergence.png",
+    "views.png",
+];
+
+/// The direction convention, in one sentence.
+pub const CONVENTION: &str =
+    "T_ij maps points of cloud i into the frame of cloud j (x_j = T_ij x_i); row-major 4x4";
+
+/// Names of the three transforms, in loop order.
+const PAIRS: [&str; 3] = ["T12", "T23", "T31"];
+
+/// A results folder ready to be written.
+#[derive(Debug)]
+pub struct OutputDir {
+    /// The folder.
+    pub path: PathBuf,
+    /// This run created it (so it is removed again if the run fails before writing).
+    created: bool,
+}
+
+impl OutputDir {
+    /// Removes the folder if this run created it and nothing was written into it.
+    pub fn discard_if_unused(&self) {
+        if self.created {
+            let _ = std::fs::remove_dir(&self.path);
+        }
+    }
+}
+
+/// UTC time as `YYYYMMDD-HHMMSS`.
+pub fn timestamp() -> String {
+    let secs = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_secs())
+        .unwrap_or(0);
+    let days = (secs / 86400) as i64;
+    let rem = secs % 86400;
+    // Civil date from days since 1970-01-01 (Howard Hinnant's algorithm).
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    let y = yoe + era * 400 + i64::from(m <= 2);
+    format!(
+        "{y:04}{m:02}{d:02}-{:02}{:02}{:02}",
+        rem / 3600,
+        rem % 3600 / 60,
+        rem % 60
+    )
+}
+
+fn is_empty_dir(dir: &Path) -> CliResult<bool> {
+    Ok(std::fs::read_dir(dir)
+        .map_err(|e| {
+            Failure(format!(
+                "{}: cannot read the output folder: {e}",
+                dir.display()
+            ))
+        })?
+        .next()
+        .is_none())
+}
+
+/// Chooses and creates the output folder. Given: it must be new or empty unless `force`.
+/// Not given: `results/<timestamp>`, with a `-2`, `-3`, ... suffix if that is taken. An
+/// output file may never replace an input, and the folder must be writable.
+pub fn prepare_output(dir: Option<&Path>, inputs: &[PathBuf], force: bool) -> CliResult<OutputDir> {
+    let path = match dir {
+        Some(d) => {
+            if d.exists() {
+                if !d.is_dir() {
+                    return Err(Failure(format!(
+                        "{}: the output path exists and is not a folder",
+                        d.display()
+                    )));
+                }
+                if !force && !is_empty_dir(d)? {
+                    return Err(Failure(format!(
+                        "{}: the output folder is not empty (use --force to write into it; files of the same name are replaced)",
+                        d.display()
+                    )));
+                }
+            }
+            d.to_path_buf()
+        }
+        None => {
+            let base = PathBuf::from("results").join(timestamp());
+            let mut candidate = base.clone();
+            let mut k = 2;
+            while candidate.exists() && !(candidate.is_dir() && is_empty_dir(&candidate)?) {
+                candidate = PathBuf::from(format!("{}-{k}", base.display()));
+                k += 1;
+            }
+            candidate
+        }
+    };
+    let created = !path.exists();
+    std::fs::create_dir_all(&path).map_err(|e| {
+        Failure(format!(
+            "{}: cannot create the output folder: {e}",
+            path.display()
+        ))
+    })?;
+    let out = OutputDir { path, created };
+    if let Err(e) = check_output(&out.path, inputs) {
+        out.discard_if_unused();
+        return Err(e);
+    }
+    Ok(out)
+}
+
+fn check_output(dir: &Path, inputs: &[PathBuf]) -> CliResult<()> {
+    let canonical = std::fs::canonicalize(dir).map_err(|e| {
+        Failure(format!(
+            "{}: cannot open the output folder: {e}",
+            dir.display()
+        ))
+    })?;
+    for input in inputs {
+        let Ok(p) = std::fs::canonicalize(input) else {
+            continue;
+        };
+        if p.parent() == Some(canonical.as_path())
+            && p.file_name()
+                .is_some_and(|n| OUTPUT_FILES.iter().any(|o| n == *o))
+        {
+            return Err(Failure(format!(
+                "{}: this input would be overwritten by the output; choose another --output folder",
+                input.display()
+            )));
+        }
+    }
+    // Fail now, not after a long run, if the folder cannot be written.
+    let probe = dir.join(".mtpcr-write-check");
+    std::fs::write(&probe, b"").map_err(|e| {
+        Failure(format!(
+            "{}: cannot write into the output folder: {e}",
+            dir.display()
+        ))
+    })?;
+    let _ = std::fs::remove_file(&probe);
+    Ok(())
+}
+
+/// A transform as four aligned lines of text (fixed-width columns, signs lined up).
+pub fn matrix_block(t: &Transform) -> String {
+    let mut s = String::new();
+    for i in 0..4 {
+        let row: Vec<String> = (0..4).map(|j| format!("{:>13.9}", t[(i, j)])).collect();
+        s.push_str(&row.join(" "));
+        s.push('\n');
+    }
+    s
+}
+
+/// What a run used and produced, for the files.
+pub struct RunRecord<'a> {
+    /// The input files, in loop order.
+    pub inputs: &'a [PathBuf],
+    /// The clouds as read.
+    pub clouds: &'a [PointCloud; 3],
+    /// The settings of the run (its seed is filled in from the result).
+    pub config: &'a Config,
+    /// The registration.
+    pub result: &'a Registration,
+    /// `dump-config`-style help for `config.toml`.
+    pub field_help: &'a std::collections::BTreeMap<String, String>,
+}
+
+fn write_file(path: &Path, contents: &[u8]) -> CliResult<()> {
+    std::fs::write(path, contents).map_err(|e| Failure(format!("{}: {e}", path.display())))
+}
+
+/// The content of `result.json`.
+pub fn result_json(rec: &RunRecord<'_>) -> serde_json::Value {
+    let r = rec.result;
+    let [t12, t23, t31] = r.transforms;
+    serde_json::json!({
+        "inputs": rec.inputs.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
+        "convention": CONVENTION,
+        "transforms": { "T12": matrix_rows(&t12), "T23": matrix_rows(&t23), "T31": matrix_rows(&t31) },
+        "loop_residual": r.loop_residual(),
+        "best_costs": { "original": r.best_costs.original, "aiding": r.best_costs.aiding },
+        "evaluations": r.evaluations,
+        "seconds": r.seconds,
+        "seed": r.seed,
+        "settings": Config { seed: Some(r.seed), ..rec.config.clone() },
+        "task_names": TASK_NAMES,
+        "history": r.history,
+    })
+}
+
+/// The content of `transforms.txt`.
+pub fn transforms_text(rec: &RunRecord<'_>) -> String {
+    let mut s = format!("# {CONVENTION}.\n");
+    for (i, p) in rec.inputs.iter().enumerate() {
+        s.push_str(&format!("# cloud {}: {}\n", i + 1, p.display()));
+    }
+    for (k, name) in PAIRS.iter().enumerate() {
+        let (i, j) = (k + 1, (k + 1) % 3 + 1);
+        s.push_str(&format!(
+            "\n{name} (maps cloud {i} into the frame of cloud {j}):\n{}",
+            matrix_block(&rec.result.transforms[k])
+        ));
+    }
+    s
+}
+
+/// Writes every file of [`OUTPUT_FILES`] into `dir`; returns their paths.
+pub fn write_results(dir: &Path, rec: &RunRecord<'_>) -> CliResult<Vec<PathBuf>> {
+    let path = |name: &str| dir.join(name);
+    let json = serde_json::to_string_pretty(&result_json(rec))
+        .map_err(|e| Failure(format!("cannot serialise the result: {e}")))?;
+    write_file(&path("result.json"), json.as_bytes())?;
+
+    let seeded = Config {
+        seed: Some(rec.result.seed),
+        ..rec.config.clone()
+    };
+    let toml = crate::settings::config_toml(
+        &seeded,
+        rec.field_help,
+        "Settings of this run (mtpcr register ... --config config.toml repeats it)",
+    )?;
+    write_file(&path("config.toml"), toml.as_bytes())?;
+
+    write_file(&path("transforms.txt"), transforms_text(rec).as_bytes())?;
+
+    let poses = rec.result.poses();
+    let moved: [PointCloud; 3] = std::array::from_fn(|i| rec.clouds[i].transformed(&poses[i]));
+    let mut points = Vec::with_capacity(moved.iter().map(PointCloud::len).sum());
+    let mut colors = Vec::with_capacity(points.capacity());
+    for (i, c) in moved.iter().enumerate() {
+        points.extend_from_slice(c.points());
+        colors.extend(std::iter::repeat_n(plots::VIEW_COLORS[i], c.len()));
+    }
+    write_ply(path("merged.ply"), &points, Some(&colors))?;
+
+    plots::convergence_png(&rec.result.history, &path("convergence.png"))?;
+
+    let labels: [String; 3] = std::array::from_fn(|i| {
+        let name = rec.inputs[i].file_name().map_or_else(
+            || rec.inputs[i].display().to_string(),
+            |n| n.to_string_lossy().into_owned(),
+        );
+        format!("cloud {}: {name}", i + 1)
+    });
+    plots::views_png(
+        std::array::from_fn(|i| rec.clouds[i].points()),
+        std::array::from_fn(|i| moved[i].points()),
+        &labels,
+        &path("views.png"),
+    )?;
+    Ok(OUTPUT_FILES.iter().map(|n| path(n)).collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn timestamps_look_like_dates() {
+        let t = timestamp();
+        assert_eq!(t.len(), 15, "{t}");
+        assert!(t.starts_with("20") && t.as_bytes()[8] == b'-', "{t}");
+    }
+}

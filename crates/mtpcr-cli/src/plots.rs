@@ -1,0 +1,387 @@
+//! The two figures of a results folder, drawn with plotters into an RGB buffer and encoded
+//! with the png crate. Text uses the embedded DejaVu Sans (assets/, licence beside it), so
+//! the charts are readable on machines without fonts.
+
+use crate::error::{CliResult, Failure};
+use mtpcr_core::TASK_NAMES;
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use plotters::style::{register_font, FontStyle};
+use std::io::BufWriter;
+use std::path::Path;
+use std::sync::OnceLock;
+
+static DEJAVU_SANS: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
+/// The family name the embedded font is registered under.
+const FONT: &str = "sans-serif";
+
+/// One colour per view (cloud 1, 2, 3), also used in `merged.ply`.
+pub const VIEW_COLORS: [[u8; 3]; 3] = [[214, 39, 40], [44, 160, 44], [31, 119, 180]];
+/// One colour per pair (J1, J2, J3) in the convergence chart.
+const TASK_COLORS: [RGBColor; 3] = [
+    RGBColor(31, 119, 180),
+    RGBColor(255, 127, 14),
+    RGBColor(148, 103, 189),
+];
+/// Points drawn per panel of `views.png` (all three clouds together), at most.
+const POINTS_PER_PANEL: usize = 20_000;
+
+fn rgb(c: [u8; 3]) -> RGBColor {
+    RGBColor(c[0], c[1], c[2])
+}
+
+fn ensure_font() -> CliResult<()> {
+    static REGISTERED: OnceLock<bool> = OnceLock::new();
+    if *REGISTERED.get_or_init(|| register_font(FONT, FontStyle::Normal, DEJAVU_SANS).is_ok()) {
+        Ok(())
+    } else {
+        Err(Failure("the embedded font cannot be loaded".to_string()))
+    }
+}
+
+/// Draws into a fresh white `width x height` RGB image and writes it to `path` as PNG.
+fn render_png<F>(path: &Path, (width, height): (u32, u32), draw: F) -> CliResult<()>
+where
+    F: FnOnce(&DrawingArea<BitMapBackend<'_>, Shift>) -> Result<(), String>,
+{
+    ensure_font()?;
+    let failed = |what: &str, e: &dyn std::fmt::Display| {
+        Failure(format!("{}: cannot {what}: {e}", path.display()))
+    };
+    let mut buf = vec![255u8; width as usize * height as usize * 3];
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, (width, height)).into_drawing_area();
+        draw(&root).map_err(|e| failed("draw the figure", &e))?;
+        root.present().map_err(|e| failed("draw the figure", &e))?;
+    }
+    let file =
+        std::fs::File::create(path).map_err(|e| Failure(format!("{}: {e}", path.display())))?;
+    let mut encoder = png::Encoder::new(BufWriter::new(file), width, height);
+    encoder.set_color(png::ColorType::Rgb);
+    encoder.set_depth(png::BitDepth::Eight);
+    let mut writer = encoder.write_header().map_err(|e| failed("write", &e))?;
+    writer
+        .write_image_data(&buf)
+        .map_err(|e| failed("write", &e))?;
+    writer.finish().map_err(|e| failed("write", &e))
+}
+
+fn text(e: impl std::fmt::Display) -> String {
+    e.to_string()
+}
+
+/// `convergence.png`: the best cost of each task per generation (row 0 is the initial
+/// population); aiding tasks J1-a..J3-a on the left, original tasks J1-o..J3-o on the right.
+pub fn convergence_png(history: &[[f64; 6]], path: &Path) -> CliResult<()> {
+    if history.is_empty() {
+        return Err(Failure(format!(
+            "{}: the run has no history to plot",
+            path.display()
+        )));
+    }
+    render_png(path, (1400, 600), |root| {
+        root.fill(&WHITE).map_err(text)?;
+        let root = root
+            .margin(6, 0, 0, 0)
+            .titled("Best cost per generation of the six tasks", (FONT, 26))
+            .map_err(text)?;
+        let panels = root.split_evenly((1, 2));
+        let titles = [
+            "Aiding tasks: mean capped distance (data units)",
+            "Original tasks: 1 - inlier fraction + loop term",
+        ];
+        for (k, panel) in panels.iter().enumerate() {
+            draw_costs(panel, history, 3 * k, titles[k]).map_err(text)?;
+        }
+        Ok(())
+    })
+}
+
+fn draw_costs<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    history: &[[f64; 6]],
+    first: usize,
+    title: &str,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    let values = history
+        .iter()
+        .flat_map(|row| row[first..first + 3].iter().copied())
+        .filter(|v| v.is_finite());
+    let (lo, hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+        (lo.min(v), hi.max(v))
+    });
+    let (lo, hi) = if lo.is_finite() { (lo, hi) } else { (0.0, 1.0) };
+    let pad = ((hi - lo) * 0.06).max(hi.abs().max(1e-12) * 0.02);
+    let last = (history.len() as i32 - 1).max(1);
+    let ticks = tick_format(hi - lo + 2.0 * pad, lo.abs().max(hi.abs()));
+    let mut chart = ChartBuilder::on(area)
+        .caption(title, (FONT, 20))
+        .margin(18)
+        .margin_right(30)
+        .x_label_area_size(50)
+        .y_label_area_size(85)
+        .build_cartesian_2d(0..last, (lo - pad)..(hi + pad))?;
+    chart
+        .configure_mesh()
+        .x_desc("generation")
+        .y_desc("best cost")
+        .axis_desc_style((FONT, 18))
+        .label_style((FONT, 15))
+        .y_label_formatter(&ticks)
+        .light_line_style(RGBColor(235, 235, 235))
+        .draw()?;
+    for k in 0..3 {
+        let color = TASK_COLORS[k];
+        chart
+            .draw_series(LineSeries::new(
+                history
+                    .iter()
+                    .enumerate()
+                    .map(|(g, row)| (g as i32, row[first + k])),
+                color.stroke_width(3),
+            ))?
+            .label(TASK_NAMES[first + k])
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 24, y)], color.stroke_width(3))
+            });
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .background_style(WHITE.mix(0.9))
+        .border_style(RGBColor(160, 160, 160))
+        .label_font((FONT, 17))
+        .draw()?;
+    Ok(())
+}
+
+/// Tick labels for an axis spanning `span`: one number of decimals for the whole axis (enough
+/// for about ten ticks), scientific notation for very small or large values, and a clean `0`
+/// for rounding noise.
+fn tick_format(span: f64, largest: f64) -> impl Fn(&f64) -> String {
+    let span = if span.is_finite() && span > 0.0 {
+        span
+    } else {
+        1.0
+    };
+    let step = span / 8.0;
+    let decimals = (-step.log10()).ceil().clamp(0.0, 12.0) as usize;
+    let scientific = largest.abs() >= 1e5 || (largest.abs() < 1e-3 && largest != 0.0);
+    move |v: &f64| {
+        if v.abs() < span * 1e-9 {
+            "0".to_string()
+        } else if scientific {
+            format!("{v:.2e}")
+        } else {
+            format!("{v:.decimals$}")
+        }
+    }
+}
+
+/// One orthographic viewpoint: screen axes and depth as functions of a point.
+struct Viewpoint {
+    name: &'static str,
+    x_desc: &'static str,
+    y_desc: &'static str,
+    /// `(screen x, screen y, depth towards the viewer)`.
+    project: fn(&[f64; 3]) -> (f64, f64, f64),
+}
+
+const VIEWPOINTS: [Viewpoint; 2] = [
+    Viewpoint {
+        name: "seen from +z",
+        x_desc: "x",
+        y_desc: "y",
+        project: |p| (p[0], p[1], p[2]),
+    },
+    Viewpoint {
+        name: "seen from +x",
+        x_desc: "-z",
+        y_desc: "y",
+        project: |p| (-p[2], p[1], p[0]),
+    },
+];
+
+/// Every `k`-th point so that about `budget` remain.
+fn subsample(points: &[[f64; 3]], budget: usize) -> impl Iterator<Item = &[f64; 3]> {
+    let step = points.len().div_ceil(budget.max(1)).max(1);
+    points.iter().step_by(step)
+}
+
+/// `views.png`: a 2x2 grid, rows before (each cloud as given, in its own frame) and after
+/// registration (merged in cloud 1's frame), columns two orthographic viewpoints; points
+/// drawn far to near, coloured per view. `labels` name the clouds in the legend.
+pub fn views_png(
+    before: [&[[f64; 3]]; 3],
+    after: [&[[f64; 3]]; 3],
+    labels: &[String; 3],
+    path: &Path,
+) -> CliResult<()> {
+    let (width, height) = (1300u32, 1390u32);
+    render_png(path, (width, height), |root| {
+        root.fill(&WHITE).map_err(text)?;
+        let root = root
+            .margin(6, 0, 0, 0)
+            .titled("The three views before and after registration", (FONT, 26))
+            .map_err(text)?;
+        let (grid, legend) = root.split_vertically(root.dim_in_pixel().1 as i32 - 50);
+        let panels = grid.split_evenly((2, 2));
+        for (row, (clouds, what)) in [
+            (before, "before: as given, each in its own frame"),
+            (after, "after: merged in cloud 1's frame"),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            for (col, view) in VIEWPOINTS.iter().enumerate() {
+                let caption = format!("{what}, {}", view.name);
+                draw_view(&panels[2 * row + col], clouds, view, &caption).map_err(text)?;
+            }
+        }
+        draw_legend(&legend, labels).map_err(text)
+    })
+}
+
+fn draw_view<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    clouds: [&[[f64; 3]]; 3],
+    view: &Viewpoint,
+    caption: &str,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    let area = area.titled(caption, (FONT, 19))?;
+    let budget = POINTS_PER_PANEL / 3;
+    let mut points: Vec<(f64, f64, f64, usize)> = Vec::with_capacity(POINTS_PER_PANEL + 3);
+    for (i, cloud) in clouds.iter().enumerate() {
+        points.extend(subsample(cloud, budget).map(|p| {
+            let (x, y, depth) = (view.project)(p);
+            (x, y, depth, i)
+        }));
+    }
+    // Painter's order: the farthest points first, so nearer surfaces hide them.
+    points.sort_by(|a, b| a.2.total_cmp(&b.2));
+    let bounds = points.iter().fold(
+        [
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        ],
+        |b, &(x, y, _, _)| [b[0].min(x), b[1].max(x), b[2].min(y), b[3].max(y)],
+    );
+    let (cx, cy) = if points.is_empty() {
+        (0.0, 0.0)
+    } else {
+        ((bounds[0] + bounds[1]) / 2.0, (bounds[2] + bounds[3]) / 2.0)
+    };
+    let (dx, dy) = if points.is_empty() {
+        (1.0, 1.0)
+    } else {
+        (bounds[1] - bounds[0], bounds[3] - bounds[2])
+    };
+    let build = |x: std::ops::Range<f64>, y: std::ops::Range<f64>| {
+        ChartBuilder::on(&area)
+            .margin(12)
+            .margin_right(32)
+            .x_label_area_size(45)
+            .y_label_area_size(75)
+            .build_cartesian_2d(x, y)
+    };
+    // Equal scale on both axes: size the ranges to the plotting area's pixels.
+    let (pw, ph) = build(0.0..1.0, 0.0..1.0)?.plotting_area().dim_in_pixel();
+    let (pw, ph) = (f64::from(pw.max(1)), f64::from(ph.max(1)));
+    let per_pixel = (dx / pw).max(dy / ph).max(1e-12) * 1.06;
+    let (hw, hh) = (per_pixel * pw / 2.0, per_pixel * ph / 2.0);
+    let mut chart = build((cx - hw)..(cx + hw), (cy - hh)..(cy + hh))?;
+    let x_ticks = tick_format(2.0 * hw, cx.abs() + hw);
+    let y_ticks = tick_format(2.0 * hh, cy.abs() + hh);
+    chart
+        .configure_mesh()
+        .x_desc(view.x_desc)
+        .y_desc(view.y_desc)
+        .axis_desc_style((FONT, 17))
+        .label_style((FONT, 14))
+        .x_label_formatter(&x_ticks)
+        .y_label_formatter(&y_ticks)
+        .light_line_style(RGBColor(240, 240, 240))
+        .bold_line_style(RGBColor(220, 220, 220))
+        .draw()?;
+    let colors = VIEW_COLORS.map(rgb);
+    chart.draw_series(
+        points
+            .iter()
+            .map(|&(x, y, _, i)| Circle::new((x, y), 1, colors[i].filled())),
+    )?;
+    Ok(())
+}
+
+fn draw_legend<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    labels: &[String; 3],
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    let (w, h) = area.dim_in_pixel();
+    let slot = w as i32 / 3;
+    let y = h as i32 / 2;
+    for (i, label) in labels.iter().enumerate() {
+        let x = slot * i as i32 + 40;
+        area.draw(&Circle::new((x, y), 8, rgb(VIEW_COLORS[i]).filled()))?;
+        let style =
+            TextStyle::from((FONT, 19).into_font()).pos(plotters::style::text_anchor::Pos::new(
+                plotters::style::text_anchor::HPos::Left,
+                plotters::style::text_anchor::VPos::Center,
+            ));
+        area.draw(&Text::new(label.clone(), (x + 16, y), style))?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tick_labels_share_their_decimals_and_hide_rounding_noise() {
+        let f = tick_format(0.012, 0.014);
+        assert_eq!(
+            (f(&0.008), f(&0.01)),
+            ("0.008".to_string(), "0.010".to_string())
+        );
+        let f = tick_format(0.85, 1.0);
+        assert_eq!((f(&0.9), f(&1.0)), ("0.9".to_string(), "1.0".to_string()));
+        let f = tick_format(0.2, 0.1);
+        assert_eq!(
+            (f(&1.39e-17), f(&-0.08)),
+            ("0".to_string(), "-0.08".to_string())
+        );
+        assert_eq!(tick_format(1e-4, 2e-5)(&2e-5), "2.00e-5");
+    }
+
+    #[test]
+    fn subsampling_keeps_about_the_budget() {
+        let pts = vec![[0.0; 3]; 10_001];
+        let n = subsample(&pts, 1000).count();
+        assert!((900..=1000).contains(&n), "{n}");
+        assert_eq!(subsample(&pts[..5], 1000).count(), 5);
+    }
+
+    #[test]
+    fn figures_are_png_files() {
+        let dir = std::env::temp_dir().join(format!("mtpcr-cli-plots-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let history: Vec<[f64; 6]> = (0..6).map(|g| [1.0 / (g + 1) as f64; 6]).collect();
+        convergence_png(&history, &dir.join("c.png")).unwrap();
+        let cloud: Vec<[f64; 3]> = (0..500).map(|i| [i as f64, (i % 7) as f64, 0.5]).collect();
+        let labels = ["a".to_string(), "b".to_string(), "c".to_string()];
+        views_png(
+            [&cloud, &cloud, &cloud],
+            [&cloud, &cloud, &cloud],
+            &labels,
+            &dir.join("v.png"),
+        )
+        .unwrap();
+        for f in ["c.png", "v.png"] {
+            let bytes = std::fs::read(dir.join(f)).unwrap();
+            assert!(bytes.starts_with(b"\x89PNG\r\n\x1a\n"), "{f}");
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

@@ -1,0 +1,77 @@
+//! Progress on stderr (indicatif). Bars draw only when stderr is a terminal; `--quiet` hides
+//! them everywhere.
+
+use indicatif::{ProgressBar, ProgressStyle};
+use mtpcr_core::{Progress, TASK_NAMES};
+use std::ops::ControlFlow;
+use std::time::Duration;
+
+fn styled(bar: ProgressBar, template: &str, label: &str) -> ProgressBar {
+    bar.set_style(
+        ProgressStyle::with_template(template)
+            .expect("the progress template is valid")
+            .progress_chars("=> ")
+            .tick_chars("|/-\\ "),
+    );
+    bar.set_prefix(label.to_string());
+    bar.enable_steady_tick(Duration::from_millis(200));
+    bar
+}
+
+/// A bar over the generations of one registration run.
+pub fn generation_bar(generations: usize, quiet: bool, label: &str) -> ProgressBar {
+    if quiet {
+        return ProgressBar::hidden();
+    }
+    let bar = styled(
+        ProgressBar::new(generations as u64),
+        "{prefix} {spinner} [{bar:25}] gen {pos}/{len} {msg} | {elapsed} ETA {eta}",
+        label,
+    );
+    bar.set_message("preparing the clouds (downsampling, search structures)");
+    bar
+}
+
+/// A bar over the runs of an evaluation.
+pub fn run_bar(runs: usize, quiet: bool, label: &str) -> ProgressBar {
+    if quiet {
+        return ProgressBar::hidden();
+    }
+    styled(
+        ProgressBar::new(runs as u64),
+        "{prefix} {spinner} [{bar:25}] {pos}/{len} runs done | {msg} | {elapsed} ETA {eta}",
+        label,
+    )
+}
+
+/// The observer that moves `bar` after each generation and shows the best original costs.
+pub fn observe(bar: &ProgressBar) -> impl FnMut(&Progress) -> ControlFlow<()> + '_ {
+    move |p: &Progress| {
+        bar.set_length(p.generations as u64);
+        bar.set_position(p.generation as u64);
+        bar.set_message(format!(
+            "best {} {:.4} {} {:.4} {} {:.4}",
+            TASK_NAMES[3],
+            p.best_costs[3],
+            TASK_NAMES[4],
+            p.best_costs[4],
+            TASK_NAMES[5],
+            p.best_costs[5]
+        ));
+        ControlFlow::Continue(())
+    }
+}
+
+/// Registers with a generation bar on stderr; the bar is cleared when the run ends.
+pub fn register_with_bar(
+    clouds: &[mtpcr_core::PointCloud; 3],
+    config: &mtpcr_core::Config,
+    quiet: bool,
+    label: &str,
+) -> mtpcr_core::Result<mtpcr_core::Registration> {
+    let bar = generation_bar(config.restarts * config.generations, quiet, label);
+    let mut observer = observe(&bar);
+    let result = mtpcr_core::register(clouds, config, Some(&mut observer));
+    bar.finish_and_clear();
+    result
+}

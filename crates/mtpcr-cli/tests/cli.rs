@@ -1,0 +1,635 @@
+//! Tests of the real `mtpcr` binary: outputs, exit codes and error messages. Runs use small
+//! settings; their accuracy is not checked here (the engine's tests do that).
+
+use assert_cmd::Command;
+use mtpcr_core::io::{read_ply, write_ply};
+use mtpcr_core::{synthetic, Config};
+use std::path::{Path, PathBuf};
+
+/// Settings that make a registration take a fraction of a second.
+const FAST: [&str; 5] = ["--generations", "3", "--population-size", "8", "-q"];
+
+const PNG_SIGNATURE: &[u8] = b"\x89PNG\r\n\x1a\n";
+
+fn mtpcr() -> Command {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_mtpcr"));
+    cmd.env_remove("RUST_BACKTRACE");
+    cmd
+}
+
+/// Three small overlapping synthetic views written as PLY files into `dir`.
+fn write_views(dir: &Path) -> [PathBuf; 3] {
+    let problem = synthetic::three_views(5, 3000);
+    std::array::from_fn(|i| {
+        let path = dir.join(format!("view{}.ply", i + 1));
+        write_ply(&path, problem.clouds[i].points(), None).unwrap();
+        path
+    })
+}
+
+fn args_of(paths: &[PathBuf]) -> Vec<String> {
+    paths.iter().map(|p| p.display().to_string()).collect()
+}
+
+/// Runs `cmd`, expects exit code `code`, an `error: ` line naming every needle, no panic.
+fn fails_with(cmd: &mut Command, code: i32, needles: &[&str]) -> String {
+    let out = cmd.assert().code(code).get_output().clone();
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    if code == 1 {
+        assert!(stderr.starts_with("error: "), "{stderr}");
+    }
+    for n in needles {
+        assert!(stderr.contains(n), "`{n}` not in: {stderr}");
+    }
+    stderr
+}
+
+fn read_json(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+#[test]
+fn version_prints_the_package_version() {
+    mtpcr()
+        .arg("--version")
+        .assert()
+        .success()
+        .stdout(format!("mtpcr {}\n", env!("CARGO_PKG_VERSION")));
+}
+
+#[test]
+fn dump_config_prints_parseable_defaults() {
+    for (flag, expected) in [
+        (None, Config::default()),
+        (Some("--paper"), Config::paper()),
+    ] {
+        let mut cmd = mtpcr();
+        cmd.arg("dump-config").args(flag);
+        let out = cmd.assert().success().get_output().stdout.clone();
+        let text = String::from_utf8(out).unwrap();
+        assert!(text.contains("# Individuals per population"), "{text}");
+        let parsed: Config = toml::from_str(&text).unwrap();
+        assert_eq!(parsed, expected);
+    }
+}
+
+#[test]
+fn dump_config_round_trips_through_config() {
+    let dir = tempfile::tempdir().unwrap();
+    let views = write_views(dir.path());
+    let dumped = mtpcr()
+        .arg("dump-config")
+        .assert()
+        .success()
+        .get_output()
+        .stdout
+        .clone();
+    let file = dir.path().join("my.toml");
+    std::fs::write(&file, dumped).unwrap();
+    let out = dir.path().join("out");
+    mtpcr()
+        .arg("register")
+        .args(args_of(&views))
+        .args([
+            "--config",
+            file.to_str().unwrap(),
+            "--seed",
+            "3",
+            "--output",
+        ])
+        .arg(&out)
+        .args(FAST)
+        .assert()
+        .success();
+    let json = read_json(&out.join("result.json"));
+    let used: Config = serde_json::from_value(json["settings"].clone()).unwrap();
+    let expected = Config {
+        generations: 3,
+        population_size: 8,
+        seed: Some(3),
+        ..Config::default()
+    };
+    assert_eq!(used, expected);
+
+    // The results folder's config.toml repeats the run exactly.
+    let again = dir.path().join("again");
+    mtpcr()
+        .arg("register")
+        .args(args_of(&views))
+        .arg("--config")
+        .arg(out.join("config.toml"))
+        .arg("--output")
+        .arg(&again)
+        .arg("-q")
+        .assert()
+        .success();
+    let json2 = read_json(&again.join("result.json"));
+    assert_eq!(json2["settings"], json["settings"]);
+    assert_eq!(json2["transforms"], json["transforms"]);
+}
+
+#[test]
+fn demo_prints_its_lines_and_exits_by_the_2_degree_rule() {
+    let out = mtpcr()
+        .args(["demo", "--seed", "1", "--generations", "15"])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8(out.stdout).unwrap();
+    let lines: Vec<&str> = stdout.lines().collect();
+    assert_eq!(lines.len(), 6, "{stdout}");
+    assert_eq!(
+        lines[0],
+        "demo: three synthetic views of 20000 points each, moved by random rigid motions (seed 1)"
+    );
+    for (line, pair) in lines[1..4].iter().zip(["T12", "T23", "T31"]) {
+        assert!(
+            line.starts_with(&format!("  {pair}: rotation error ")),
+            "{line}"
+        );
+        assert!(line.ends_with(" (shape size 0.15)"), "{line}");
+    }
+    assert!(lines[4].starts_with("  loop residual "), "{}", lines[4]);
+    assert!(lines[4].contains(&format!(
+        "{} evaluations",
+        Config {
+            generations: 15,
+            ..Config::default()
+        }
+        .evaluations()
+    )));
+    let passed = lines[5] == "demo passed: every pair under 2 degrees";
+    let failed = lines[5] == "demo FAILED: some pair is 2 degrees or more off";
+    assert!(passed || failed, "{}", lines[5]);
+    assert_eq!(out.status.code(), Some(if passed { 0 } else { 1 }));
+    assert!(!String::from_utf8_lossy(&out.stderr).contains("panicked"));
+}
+
+#[test]
+fn demo_reads_the_config_file_and_flags_override_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("small.toml");
+    std::fs::write(&file, "generations = 2\npopulation_size = 8\nseed = 4\n").unwrap();
+    let run = |extra: &[&str]| {
+        let out = mtpcr()
+            .args(["demo", "--points", "2000", "-q", "--config"])
+            .arg(&file)
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(matches!(out.status.code(), Some(0 | 1)), "{out:?}");
+        String::from_utf8(out.stdout).unwrap()
+    };
+    let evaluations = |g: usize| {
+        Config {
+            generations: g,
+            population_size: 8,
+            ..Config::default()
+        }
+        .evaluations()
+    };
+    let stdout = run(&[]);
+    assert!(stdout.contains("(seed 4)"), "{stdout}");
+    assert!(
+        stdout.contains(&format!(" {} evaluations", evaluations(2))),
+        "{stdout}"
+    );
+    let stdout = run(&["--generations", "3", "--seed", "6"]);
+    assert!(stdout.contains("(seed 6)"), "{stdout}");
+    assert!(
+        stdout.contains(&format!(" {} evaluations", evaluations(3))),
+        "{stdout}"
+    );
+}
+
+#[test]
+fn register_writes_every_output_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let views = write_views(dir.path());
+    let out = dir.path().join("out");
+    let assert = mtpcr()
+        .arg("register")
+        .args(args_of(&views))
+        .arg("--output")
+        .arg(&out)
+        .args(["--seed", "11"])
+        .args(FAST)
+        .assert()
+        .success()
+        .stderr("");
+    let stdout = String::from_utf8_lossy(&assert.get_output().stdout).into_owned();
+    for needle in [
+        "T12 (cloud 1 -> cloud 2 frame) =",
+        "T31",
+        "loop residual",
+        "seed 11",
+        "wrote ",
+    ] {
+        assert!(stdout.contains(needle), "`{needle}` not in {stdout}");
+    }
+    for name in [
+        "result.json",
+        "config.toml",
+        "transforms.txt",
+        "merged.ply",
+        "convergence.png",
+        "views.png",
+    ] {
+        let len = std::fs::metadata(out.join(name))
+            .map(|m| m.len())
+            .unwrap_or(0);
+        assert!(len > 0, "{name} is missing or empty");
+    }
+    for png in ["convergence.png", "views.png"] {
+        assert!(
+            std::fs::read(out.join(png))
+                .unwrap()
+                .starts_with(PNG_SIGNATURE),
+            "{png}"
+        );
+    }
+
+    let json = read_json(&out.join("result.json"));
+    for key in [
+        "inputs",
+        "convention",
+        "transforms",
+        "loop_residual",
+        "best_costs",
+        "evaluations",
+        "seconds",
+        "seed",
+        "settings",
+        "history",
+        "task_names",
+    ] {
+        assert!(json.get(key).is_some(), "result.json has no `{key}`");
+    }
+    assert_eq!(json["inputs"].as_array().unwrap().len(), 3);
+    for t in ["T12", "T23", "T31"] {
+        let rows = json["transforms"][t].as_array().unwrap();
+        assert_eq!(rows.len(), 4);
+        assert!(rows.iter().all(|r| r.as_array().unwrap().len() == 4));
+        assert_eq!(rows[3], serde_json::json!([0.0, 0.0, 0.0, 1.0]));
+    }
+    assert_eq!(json["best_costs"]["original"].as_array().unwrap().len(), 3);
+    assert_eq!(json["best_costs"]["aiding"].as_array().unwrap().len(), 3);
+    assert_eq!(json["seed"], 11);
+    assert_eq!(json["settings"]["seed"], 11);
+    assert_eq!(json["settings"]["generations"], 3);
+    let history = json["history"].as_array().unwrap();
+    assert_eq!(history.len(), 4, "the initial population and 3 generations");
+    assert!(history.iter().all(|r| r.as_array().unwrap().len() == 6));
+    assert_eq!(
+        json["task_names"],
+        serde_json::json!(["J1-a", "J2-a", "J3-a", "J1-o", "J2-o", "J3-o"])
+    );
+
+    let text = std::fs::read_to_string(out.join("transforms.txt")).unwrap();
+    for needle in [
+        "T_ij maps points of cloud i into the frame of cloud j",
+        "T12 (",
+        "T23 (",
+        "T31 (",
+    ] {
+        assert!(text.contains(needle), "`{needle}` not in {text}");
+    }
+    let merged = read_ply(out.join("merged.ply")).unwrap();
+    assert_eq!(merged.len(), 9000);
+}
+
+#[test]
+fn register_defaults_to_a_new_timestamped_folder() {
+    let dir = tempfile::tempdir().unwrap();
+    let views = write_views(dir.path());
+    for _ in 0..2 {
+        mtpcr()
+            .current_dir(dir.path())
+            .arg("register")
+            .args(args_of(&views))
+            .args(FAST)
+            .assert()
+            .success();
+    }
+    let runs: Vec<PathBuf> = std::fs::read_dir(dir.path().join("results"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(runs.len(), 2, "two runs, two folders: {runs:?}");
+    for r in runs {
+        assert!(r.join("result.json").is_file(), "{}", r.display());
+    }
+}
+
+#[test]
+fn register_refuses_a_non_empty_folder_without_force() {
+    let dir = tempfile::tempdir().unwrap();
+    let views = write_views(dir.path());
+    let out = dir.path().join("out");
+    std::fs::create_dir(&out).unwrap();
+    std::fs::write(out.join("notes.txt"), "keep me").unwrap();
+    let run = |force: bool| {
+        let mut cmd = mtpcr();
+        cmd.arg("register")
+            .args(args_of(&views))
+            .arg("--output")
+            .arg(&out)
+            .args(FAST);
+        if force {
+            cmd.arg("--force");
+        }
+        cmd
+    };
+    fails_with(&mut run(false), 1, &["not empty", "--force", "out"]);
+    assert!(!out.join("result.json").exists());
+    run(true).assert().success();
+    assert!(out.join("result.json").is_file());
+    assert_eq!(
+        std::fs::read_to_string(out.join("notes.txt")).unwrap(),
+        "keep me"
+    );
+}
+
+#[test]
+fn register_never_overwrites_an_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let views = write_views(dir.path());
+    let input = dir.path().join("merged.ply");
+    std::fs::copy(&views[0], &input).unwrap();
+    let before = std::fs::read(&input).unwrap();
+    fails_with(
+        mtpcr()
+            .arg("register")
+            .arg(&input)
+            .args(args_of(&views[1..]))
+            .arg("--output")
+            .arg(dir.path())
+            .arg("--force")
+            .args(FAST),
+        1,
+        &["merged.ply", "overwritten"],
+    );
+    assert_eq!(std::fs::read(&input).unwrap(), before);
+}
+
+#[test]
+fn bad_input_files_are_named_in_the_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let views = write_views(dir.path());
+    let out = dir.path().join("out");
+    let register_with = |first: &Path| {
+        let mut cmd = mtpcr();
+        cmd.arg("register")
+            .arg(first)
+            .args(args_of(&views[1..]))
+            .arg("--output")
+            .arg(&out)
+            .args(FAST);
+        cmd
+    };
+    let missing = dir.path().join("missing.ply");
+    fails_with(
+        &mut register_with(&missing),
+        1,
+        &["missing.ply", "No such file"],
+    );
+
+    let malformed = dir.path().join("malformed.ply");
+    std::fs::write(&malformed, "hello\nthis is not a point cloud\n").unwrap();
+    fails_with(
+        &mut register_with(&malformed),
+        1,
+        &["malformed.ply", "not a PLY file"],
+    );
+
+    let truncated = dir.path().join("truncated.ply");
+    let mut bytes = std::fs::read(&views[0]).unwrap();
+    bytes.truncate(bytes.len() / 2);
+    std::fs::write(&truncated, bytes).unwrap();
+    fails_with(&mut register_with(&truncated), 1, &["truncated.ply"]);
+
+    let tiny = dir.path().join("tiny.ply");
+    write_ply(
+        &tiny,
+        &[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+        None,
+    )
+    .unwrap();
+    fails_with(
+        &mut register_with(&tiny),
+        1,
+        &["tiny.ply", "3 points", "at least"],
+    );
+    assert!(
+        !out.exists(),
+        "no output folder for a run that never started"
+    );
+}
+
+#[test]
+fn usage_errors_exit_with_2() {
+    fails_with(
+        mtpcr().args(["register", "a.ply", "b.ply", "c.ply", "--no-such-flag"]),
+        2,
+        &["--no-such-flag"],
+    );
+    fails_with(mtpcr().args(["register", "a.ply", "b.ply"]), 2, &[]);
+    fails_with(
+        mtpcr().args(["demo", "--generations", "many"]),
+        2,
+        &["--generations"],
+    );
+    fails_with(
+        mtpcr().args(["demo", "--sampling", "sideways"]),
+        2,
+        &["farthest", "random"],
+    );
+    fails_with(&mut mtpcr(), 2, &["Usage"]);
+}
+
+#[test]
+fn bad_setting_values_name_the_field() {
+    fails_with(
+        mtpcr().args(["demo", "--population-size", "2", "-q"]),
+        1,
+        &["population_size", "--population-size"],
+    );
+    fails_with(
+        mtpcr().args(["demo", "--sample-ratio", "1.5", "-q"]),
+        1,
+        &["sample_ratio"],
+    );
+    fails_with(
+        mtpcr().args(["eval", "x.json", "--p-intra", "2"]),
+        1,
+        &["p_intra"],
+    );
+
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("bad.toml");
+    std::fs::write(&file, "generations = 5\nalpha = -1.0\n").unwrap();
+    let views = write_views(dir.path());
+    fails_with(
+        mtpcr()
+            .arg("register")
+            .args(args_of(&views))
+            .arg("--config")
+            .arg(&file)
+            .arg("-q"),
+        1,
+        &["alpha", "bad.toml"],
+    );
+    // A flag overrides the file, so the same file with --alpha works.
+    let out = dir.path().join("out");
+    mtpcr()
+        .arg("register")
+        .args(args_of(&views))
+        .arg("--config")
+        .arg(&file)
+        .args([
+            "--alpha",
+            "0.05",
+            "--population-size",
+            "8",
+            "-q",
+            "--output",
+        ])
+        .arg(&out)
+        .assert()
+        .success();
+    assert_eq!(
+        read_json(&out.join("result.json"))["settings"]["generations"],
+        5
+    );
+}
+
+#[test]
+fn bad_config_files_are_named_in_the_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let write = |name: &str, text: &str| {
+        let p = dir.path().join(name);
+        std::fs::write(&p, text).unwrap();
+        p
+    };
+    let unknown = write("unknown.toml", "generations = 5\npopulation = 20\n");
+    let wrong_type = write("type.toml", "generations = \"many\"\n");
+    let not_toml = write("broken.toml", "generations = = 5\n");
+    for sub in [&["demo"][..], &["eval", "problem.json"][..]] {
+        fails_with(
+            mtpcr().args(sub).arg("--config").arg(&unknown),
+            1,
+            &["unknown.toml", "population"],
+        );
+    }
+    fails_with(
+        mtpcr().arg("demo").arg("--config").arg(&wrong_type),
+        1,
+        &["type.toml", "generations"],
+    );
+    fails_with(
+        mtpcr().arg("demo").arg("--config").arg(&not_toml),
+        1,
+        &["broken.toml", "line 1"],
+    );
+    fails_with(
+        mtpcr()
+            .arg("demo")
+            .arg("--config")
+            .arg(dir.path().join("absent.toml")),
+        1,
+        &["absent.toml", "cannot read the config file"],
+    );
+}
+
+#[test]
+fn an_unwritable_output_folder_is_an_error_not_a_panic() {
+    let dir = tempfile::tempdir().unwrap();
+    let views = write_views(dir.path());
+    let file = dir.path().join("a-file");
+    std::fs::write(&file, "x").unwrap();
+    fails_with(
+        mtpcr()
+            .arg("register")
+            .args(args_of(&views))
+            .arg("--output")
+            .arg(&file)
+            .args(FAST),
+        1,
+        &["a-file", "not a folder"],
+    );
+    fails_with(
+        mtpcr()
+            .arg("register")
+            .args(args_of(&views))
+            .arg("--output")
+            .arg(file.join("sub"))
+            .args(FAST),
+        1,
+        &["cannot create the output folder"],
+    );
+}
+
+#[test]
+fn eval_runs_a_problem_file_and_reports_each_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let views = write_views(dir.path());
+    let truth = synthetic::three_views(5, 3000).ground_truth;
+    // Poses in view 1's frame: x_1 = pose_i x_i, so pose_2 = T12^-1 and pose_3 = T31.
+    let poses = [
+        mtpcr_core::Transform::identity(),
+        mtpcr_core::se3::invert_rigid(&truth[0]),
+        truth[2],
+    ];
+    let problem = serde_json::json!({
+        "name": "synthetic",
+        "scans": ["view1.ply", "view2.ply", "view3.ply"],
+        "poses": poses.iter().map(mtpcr_core::io::matrix_rows).collect::<Vec<_>>(),
+    });
+    let file = dir.path().join("problem.json");
+    std::fs::write(&file, problem.to_string()).unwrap();
+    let report = dir.path().join("report.json");
+    let out = mtpcr()
+        .arg("eval")
+        .arg(&file)
+        .arg("--data-root")
+        .arg(dir.path())
+        .args([
+            "--runs",
+            "2",
+            "--seed",
+            "4",
+            "--generations",
+            "3",
+            "--population-size",
+            "8",
+            "--json",
+        ])
+        .arg(&report)
+        .assert()
+        .success()
+        .get_output()
+        .clone();
+    let stdout = String::from_utf8(out.stdout).unwrap();
+    let lines: Vec<&str> = stdout.lines().collect();
+    assert!(
+        lines[0].starts_with("problem ") && lines[0].contains("Err_R x1000"),
+        "{stdout}"
+    );
+    assert!(
+        lines[1].starts_with("synthetic ") && lines[1].contains(" 2 "),
+        "{stdout}"
+    );
+    assert_eq!(lines[2], format!("wrote {}", report.display()));
+    let stderr = String::from_utf8(out.stderr).unwrap();
+    assert!(stderr.contains("synthetic run 1/2 seed 4: "), "{stderr}");
+    assert!(stderr.contains("synthetic run 2/2 seed 5: "), "{stderr}");
+    let json = read_json(&report);
+    assert_eq!(json["problems"][0]["runs"].as_array().unwrap().len(), 2);
+    assert_eq!(views.len(), 3);
+
+    fails_with(
+        mtpcr().arg("eval").arg(dir.path().join("none.json")),
+        1,
+        &["none.json"],
+    );
+}

@@ -1,0 +1,122 @@
+//! PLY files and problem files.
+
+use crate::convert::{colors_from_py, points_from_py, points_to_py, transforms_to_py};
+use crate::errors::to_py;
+use mtpcr_core::io::{self, Problem};
+use numpy::{PyArray2, PyArray3};
+use pyo3::prelude::*;
+use pyo3::types::PyTuple;
+use std::path::{Path, PathBuf};
+
+fn path_text(path: &Path) -> String {
+    path.to_string_lossy().into_owned()
+}
+
+/// Reads the ``x y z`` of a PLY file's vertices (ASCII or binary, any scalar type; other
+/// elements and properties are ignored) as an ``(N, 3)`` float64 array.
+///
+/// Raises ``OSError`` (``FileNotFoundError``, ...) when the file cannot be read and
+/// ``ValueError`` when it is not a usable PLY file.
+#[pyfunction]
+pub(crate) fn read_ply(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, PyArray2<f64>>> {
+    let cloud = py.detach(|| io::read_ply(&path)).map_err(to_py)?;
+    Ok(points_to_py(py, cloud.points()))
+}
+
+/// Writes points as a binary little-endian PLY file with double coordinates (created or
+/// truncated).
+///
+/// ``points`` is anything numpy can view as an ``(N, 3)`` array of numbers; ``colors``, if
+/// given, an ``(N, 3)`` array of integers in 0..=255 (uint8) written as ``red green blue``.
+/// Raises ``ValueError`` for bad arrays and ``OSError`` when the file cannot be written.
+#[pyfunction]
+#[pyo3(signature = (path, points, colors=None))]
+pub(crate) fn write_ply(
+    py: Python<'_>,
+    path: PathBuf,
+    points: &Bound<'_, PyAny>,
+    colors: Option<&Bound<'_, PyAny>>,
+) -> PyResult<()> {
+    let points = points_from_py(points, "points")?;
+    let colors = match colors {
+        Some(c) if !c.is_none() => Some(colors_from_py(c, "colors", points.len())?),
+        _ => None,
+    };
+    py.detach(|| io::write_ply(&path, &points, colors.as_deref()))
+        .map_err(to_py)
+}
+
+/// Reads a problem file (``shared/problems/*.json``): three scans and their ground truth.
+///
+/// Scan paths are resolved against ``data_root`` when given, else against the parent of the
+/// folder holding the problem file (the layout of ``shared/``). Raises ``OSError`` when the
+/// file cannot be read and ``ValueError`` when its content is malformed.
+#[pyfunction]
+#[pyo3(signature = (path, data_root=None))]
+pub(crate) fn load_problem(
+    py: Python<'_>,
+    path: PathBuf,
+    data_root: Option<PathBuf>,
+) -> PyResult<PyProblem> {
+    let inner = py
+        .detach(|| Problem::load(&path, data_root.as_deref()))
+        .map_err(to_py)?;
+    Ok(PyProblem { inner })
+}
+
+/// A three-view registration problem with ground truth, from :func:`load_problem`. Read-only.
+///
+/// ``poses`` are scan-to-world (``x_world = pose_i @ [x_i, 1]``); ``ground_truth`` is
+/// ``[T12, T23, T31]`` with ``T_ij = inv(pose_j) @ pose_i`` mapping scan i into scan j, the
+/// same convention as :class:`Registration`.
+#[pyclass(frozen, name = "Problem", module = "mtpcr")]
+pub(crate) struct PyProblem {
+    inner: Problem,
+}
+
+#[pymethods]
+impl PyProblem {
+    /// Short name of the problem (``"bunny-a"``).
+    #[getter]
+    fn name(&self) -> &str {
+        &self.inner.name
+    }
+
+    /// The three scan files, resolved against the data root, as str.
+    #[getter]
+    fn scans(&self) -> Vec<String> {
+        self.inner.scans.iter().map(|p| path_text(p)).collect()
+    }
+
+    /// Ground-truth scan-to-world poses, 3x4x4 float64.
+    #[getter]
+    fn poses<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray3<f64>> {
+        transforms_to_py(py, &self.inner.poses)
+    }
+
+    /// Ground truth ``[T12, T23, T31]``, 3x4x4 float64.
+    #[getter]
+    fn ground_truth<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray3<f64>> {
+        transforms_to_py(py, &self.inner.ground_truth())
+    }
+
+    /// Reads the three scans: a tuple of three ``(N, 3)`` float64 arrays.
+    fn read_scans<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyTuple>> {
+        let clouds = py.detach(|| self.inner.read_scans()).map_err(to_py)?;
+        PyTuple::new(py, clouds.iter().map(|c| points_to_py(py, c.points())))
+    }
+
+    fn __repr__(&self) -> String {
+        let scans: Vec<String> = self
+            .inner
+            .scans
+            .iter()
+            .map(|p| format!("{:?}", path_text(p)))
+            .collect();
+        format!(
+            "Problem(name={:?}, scans=[{}])",
+            self.inner.name,
+            scans.join(", ")
+        )
+    }
+}

@@ -1,0 +1,51 @@
+"""mtpcr: multi-view point cloud registration by evolutionary multitasking (MTPCR).
+
+Three overlapping scans that form a loop are registered with no initial guess: six
+populations evolve together (three pairwise tasks whose loss includes a loop-closure term,
+three easier aiding tasks) and share what they find inside each pair and around the loop.
+
+Convention: ``T_ij`` maps points of cloud i into the frame of cloud j,
+``x_j = T_ij @ [x_i, 1]``; a registration returns ``T12``, ``T23`` and ``T31``.
+
+Example::
+
+    import mtpcr
+
+    a, b, c = (mtpcr.read_ply(p) for p in ("a.ply", "b.ply", "c.ply"))
+    result = mtpcr.register(a, b, c, seed=7)           # defaults: Config()
+    print(result)                                      # summary, costs, seconds
+    T12 = result.T12                                   # 4x4, cloud 1 -> cloud 2
+    fast = mtpcr.register(a, b, c, generations=20)     # any Config field as a keyword
+
+Errors: ``ValueError`` for bad clouds, settings or file content (the message names the
+argument or setting), ``TypeError`` for an unknown setting, ``OSError`` for files that cannot
+be read or written, ``RuntimeError`` for anything else.
+
+The engine is Rust (``mtpcr._mtpcr``); it runs without holding the GIL.
+"""
+
+from ._mtpcr import (
+    MIN_POINTS,
+    TASK_NAMES,
+    Config,
+    Problem,
+    Registration,
+    __version__,
+    load_problem,
+    read_ply,
+    register,
+    write_ply,
+)
+
+__all__ = [
+    "MIN_POINTS",
+    "TASK_NAMES",
+    "Config",
+    "Problem",
+    "Registration",
+    "__version__",
+    "load_problem",
+    "read_ply",
+    "register",
+    "write_ply",
+]
