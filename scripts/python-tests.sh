@@ -15,8 +15,11 @@ echo "== fresh venv in $VENV ($("$PYTHON" --version))"
 "$PYTHON" -m venv --clear "$VENV"
 echo "== pip install . pytest"
 start=$(date +%s)
-"$VENV/bin/python" -m pip install . pytest
+"$VENV/bin/python" -m pip install . pytest ruff
 echo "   installed in $(( $(date +%s) - start )) s"
+echo "== ruff"
+"$VENV/bin/python" -m ruff check python
+"$VENV/bin/python" -m ruff format --check python
 echo "== pytest python/tests"
 # Run from outside the source tree's package folder so the installed package is tested.
 "$VENV/bin/python" -m pytest python/tests -q "$@"

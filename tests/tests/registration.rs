@@ -58,7 +58,7 @@ fn observer_sees_every_generation_and_can_stop_the_run() {
         seed: Some(3),
         generations: 12,
         population_size: 20,
-        ..Config::default()
+        ..Config::paper()
     };
     let mut seen = Vec::new();
     let mut obs = |p: &mtpcr_core::Progress| {
@@ -133,7 +133,7 @@ fn restarts_keep_the_lowest_cost_run() {
         seed: Some(6),
         generations: 6,
         population_size: 20,
-        ..Config::default()
+        ..Config::paper()
     };
     let three = Config {
         restarts: 3,
@@ -156,7 +156,8 @@ fn refinement_improves_precision() {
     let plain = Config {
         seed: Some(8),
         generations: 30,
-        ..Config::paper()
+        refine_iterations: 0,
+        ..Config::default()
     };
     let refined = Config {
         refine_iterations: 30,

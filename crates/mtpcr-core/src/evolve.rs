@@ -39,8 +39,18 @@ impl SearchBox {
         std::array::from_fn(|d| self.uniform(d, rng))
     }
 
+    /// The point of the box at fractions `u` of each side (`u` in the unit cube `[0, 1]^6`
+    /// gives a point of the box; the unified space of MFEA and G-MFEA).
+    pub fn decode_unit(&self, u: &[f64; 6]) -> Individual {
+        std::array::from_fn(|d| self.at(d, u[d]))
+    }
+
+    fn at(&self, d: usize, r: f64) -> f64 {
+        self.lower[d] + (self.upper[d] - self.lower[d]) * r
+    }
+
     fn uniform(&self, d: usize, rng: &mut ChaCha8Rng) -> f64 {
-        self.lower[d] + (self.upper[d] - self.lower[d]) * rng.random::<f64>()
+        self.at(d, rng.random::<f64>())
     }
 
     /// The bound rule: far outside -> redraw, slightly outside -> clip.
@@ -159,13 +169,61 @@ fn mutants(pop: &Population, elites: usize, f: f64, rng: &mut ChaCha8Rng) -> Vec
 }
 
 /// SBX spread factor for a uniform draw `u` and index `eta`.
-fn sbx_beta(u: f64, eta: f64) -> f64 {
+pub(crate) fn sbx_beta(u: f64, eta: f64) -> f64 {
     let e = 1.0 / (eta + 1.0);
     if u <= 0.5 {
         (2.0 * u).powf(e)
     } else {
         (1.0 / (2.0 - 2.0 * u)).powf(e)
     }
+}
+
+/// The two SBX children of one variable: `(x + y)/2 -+ beta (y - x)/2` (the first is the
+/// one nearer `x` when `beta < 1`).
+#[inline]
+pub(crate) fn sbx_children(x: f64, y: f64, beta: f64) -> (f64, f64) {
+    let mid = 0.5 * (x + y);
+    let half = 0.5 * beta * (y - x);
+    (mid - half, mid + half)
+}
+
+/// The SBX index of generation `g` (0-based): from `sbx_eta_start` linearly towards
+/// `sbx_eta_end`, `start + (end - start) g / G`.
+pub(crate) fn sbx_eta(config: &Config, g: usize) -> f64 {
+    config.sbx_eta_start
+        + (config.sbx_eta_end - config.sbx_eta_start) * g as f64 / config.generations as f64
+}
+
+/// Scores `(cost, local)` of `jobs` (task slot, individual in the box), in parallel on `pool`
+/// and returned in order. `bests` = None leaves the loop term out of the original tasks' cost.
+/// A job whose cost is certainly >= `limits[slot]` stops early and scores infinity (pass
+/// infinite limits to evaluate everything in full).
+pub(crate) fn score_all(
+    tasks: &Tasks<'_>,
+    config: &Config,
+    pool: &rayon::ThreadPool,
+    jobs: &[(usize, Individual)],
+    bests: Option<&[Transform; 3]>,
+    limits: &[f64; 6],
+) -> Vec<(f64, f64)> {
+    let unit_free = config.unit_free_loop_term.then_some(tasks.shift);
+    pool.install(|| {
+        jobs.par_iter()
+            .map(|(slot, x)| {
+                let lp = match (bests, *slot >= 3) {
+                    (Some(b), true) => loop_term(*slot - 3, &decode(x), b, config.alpha, unit_free),
+                    _ => 0.0,
+                };
+                // The margin covers rounding in `local + lp`, so pruning never drops a child
+                // that full evaluation would have kept.
+                let limit = limits[*slot] - lp + 1e-12;
+                match tasks.losses[*slot].evaluate_below(&Rigid::from_individual(x), limit) {
+                    Some(local) => (local + lp, local),
+                    None => (f64::INFINITY, f64::INFINITY),
+                }
+            })
+            .collect()
+    })
 }
 
 /// Runs MTPCR. `observer` is called after every generation on the calling thread; a
@@ -197,34 +255,6 @@ fn run_mtpcr_with(
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let sbox = tasks.search_box;
 
-    // Scores (cost, local) of individuals; `bests` = None leaves the loop term out. A child
-    // whose cost is certainly >= `limits[slot]` (the worst parent's cost: such a child can
-    // never be selected) stops early and scores infinity; selection is unchanged.
-    let score_all = |jobs: &[(usize, Individual)],
-                     bests: Option<&[Transform; 3]>,
-                     limits: &[f64; 6]|
-     -> Vec<(f64, f64)> {
-        pool.install(|| {
-            jobs.par_iter()
-                .map(|(slot, x)| {
-                    let lp = match (bests, *slot >= 3) {
-                        (Some(b), true) => {
-                            loop_term(*slot - 3, &decode(x), b, config.alpha, unit_free)
-                        }
-                        _ => 0.0,
-                    };
-                    // The margin covers rounding in `local + lp`, so pruning never drops a child
-                    // that full evaluation would have kept.
-                    let limit = limits[*slot] - lp + 1e-12;
-                    match tasks.losses[*slot].evaluate_below(&Rigid::from_individual(x), limit) {
-                        Some(local) => (local + lp, local),
-                        None => (f64::INFINITY, f64::INFINITY),
-                    }
-                })
-                .collect()
-        })
-    };
-
     // Initialisation: populations in slot order, uniform in the box; no loop term.
     let init: Vec<Vec<Individual>> = (0..6)
         .map(|_| (0..n).map(|_| sbox.sample(&mut rng)).collect())
@@ -234,7 +264,7 @@ fn run_mtpcr_with(
         .enumerate()
         .flat_map(|(s, xs)| xs.iter().map(move |x| (s, *x)))
         .collect();
-    let scores = score_all(&jobs, None, &[f64::INFINITY; 6]);
+    let scores = score_all(tasks, config, pool, &jobs, None, &[f64::INFINITY; 6]);
     let mut evaluations = jobs.len();
     let mut pops: Vec<Population> = init
         .into_iter()
@@ -269,8 +299,7 @@ fn run_mtpcr_with(
                 p.sort_truncate(n);
             }
         }
-        let eta = config.sbx_eta_start
-            + (config.sbx_eta_end - config.sbx_eta_start) * g as f64 / generations as f64;
+        let eta = sbx_eta(config, g);
 
         let mut children: Vec<Vec<Individual>> = vec![Vec::new(); 6];
         for j in 0..3 {
@@ -304,11 +333,9 @@ fn run_mtpcr_with(
                 for d in 0..6 {
                     let beta = sbx_beta(rng.random::<f64>(), eta);
                     for (pop, v, c) in [(aid, &v_aid, &mut c_aid), (orig, &v_orig, &mut c_orig)] {
-                        let (x, y) = (pop.x[i][d], v[i][d]);
-                        let mid = 0.5 * (x + y);
-                        let half = 0.5 * beta * (y - x);
-                        c[i][d] = mid - half;
-                        c[n + i][d] = mid + half;
+                        let (lo, hi) = sbx_children(pop.x[i][d], v[i][d], beta);
+                        c[i][d] = lo;
+                        c[n + i][d] = hi;
                     }
                 }
             }
@@ -329,7 +356,9 @@ fn run_mtpcr_with(
         } else {
             [f64::INFINITY; 6]
         };
-        let scores = score_all(&jobs, Some(&bests), &limits);
+        // A child whose cost is certainly >= the worst parent's cost can never be selected: it
+        // stops early and scores infinity; selection is unchanged.
+        let scores = score_all(tasks, config, pool, &jobs, Some(&bests), &limits);
         evaluations += jobs.len();
         for (s, kids) in children.into_iter().enumerate() {
             let sc = &scores[s * 2 * n..(s + 1) * 2 * n];

@@ -28,6 +28,7 @@ pub mod eval;
 mod evolve;
 pub mod fitness;
 pub mod io;
+mod mfea;
 mod refine;
 pub mod registration;
 pub mod se3;
@@ -41,3 +42,8 @@ pub use registration::{
     register, BestCosts, Config, Method, Observer, PreparedProblem, Progress, Registration,
 };
 pub use se3::Transform;
+
+/// The README's Rust example, compiled as a doctest so it cannot drift from the API.
+#[doc = include_str!("../../../README.md")]
+#[cfg(doctest)]
+pub struct ReadmeDoctests;
