@@ -1,4 +1,5 @@
-//! A whole `Config::paper()` run (preparation included) on bunny-a, on 1 and 2 threads.
+//! A whole `Config::paper()` run (preparation included) on bunny-a, on 1 and 2 threads, and a
+//! `Config::default()` run on 2 threads.
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use mtpcr_benches::bunny_a_or_synthetic;
@@ -20,6 +21,19 @@ fn whole_run(c: &mut Criterion) {
             |bench, config| bench.iter(|| register(&clouds, config, None).expect("runs")),
         );
     }
+    group.finish();
+
+    // The recommended setting (4 restarts of 30 generations and joint ICP refinement).
+    let mut group = c.benchmark_group(format!("default_run/{label}"));
+    group.sample_size(10);
+    let config = Config {
+        seed: Some(1),
+        num_threads: 2,
+        ..Config::default()
+    };
+    group.bench_function("threads/2", |bench| {
+        bench.iter(|| register(&clouds, &config, None).expect("runs"))
+    });
     group.finish();
 }
 

@@ -242,7 +242,8 @@ impl InlierGrid {
             FULL => true,
             v => {
                 let k = (v - 2) as usize;
-                let sub = |f: f64| (((f - f.floor()) * SUB as f64) as usize).min(SUB - 1);
+                // f >= 0 here, so truncation is floor (and avoids a libm call).
+                let sub = |f: f64| (((f - (f as usize) as f64) * SUB as f64) as usize).min(SUB - 1);
                 let bit = 1u64 << (sub(fx) + SUB * (sub(fy) + SUB * sub(fz)));
                 if self.sub_full[k] & bit != 0 {
                     return true;
