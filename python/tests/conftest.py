@@ -25,7 +25,8 @@ SYNTHETIC_MAX_ROTATION_ERROR_DEG = 2.0
 REAL_DATA_MAX_ROTATION_ERROR_DEG = 5.0
 
 #: Small settings for tests that check behaviour, not accuracy (a run takes a few ms).
-QUICK = {"population_size": 12, "generations": 4}
+# One short evolution, no refinement: for tests of the API, not of accuracy.
+QUICK = {"population_size": 12, "generations": 4, "restarts": 1, "refine_iterations": 0}
 
 SHAPE_SIZE = 0.15
 

@@ -4,6 +4,7 @@
 //! Exit codes: 0 success, 1 failure (a message `error: ...` on stderr), 2 usage error.
 
 mod error;
+mod experiment;
 mod output;
 mod plots;
 mod progress;
@@ -31,7 +32,8 @@ use std::process::ExitCode;
         mtpcr demo\n  \
         mtpcr register A.ply B.ply C.ply --output out/ --seed 1\n  \
         mtpcr dump-config > my.toml && mtpcr register A.ply B.ply C.ply --config my.toml\n  \
-        mtpcr eval ../shared/problems/*.json --runs 10"
+        mtpcr eval ../shared/problems/*.json --runs 10\n  \
+        mtpcr experiment accuracy quality noise --out eval/experiments"
 )]
 struct Cli {
     #[command(subcommand)]
@@ -94,6 +96,11 @@ enum Command {
         #[command(flatten)]
         run: RunArgs,
     },
+    /// Run the paper's experiment suites (accuracy, quality, noise) into a resumable folder.
+    ///
+    /// Every run is a line of DIR/runs.jsonl (runs already there are skipped); DIR/RESULTS.md
+    /// and DIR/convergence-<problem>.png are regenerated from it.
+    Experiment(experiment::ExperimentArgs),
     /// Print the default settings as TOML (a starting point for --config FILE).
     DumpConfig {
         /// Print Config::paper() (the authors' reference) instead of Config::default().
@@ -397,6 +404,7 @@ fn main() -> ExitCode {
             run,
         )
         .map(|_| ExitCode::SUCCESS),
+        Command::Experiment(args) => experiment::run(args).map(|_| ExitCode::SUCCESS),
         Command::DumpConfig { paper } => dump_config(*paper).map(|_| ExitCode::SUCCESS),
     };
     match outcome {

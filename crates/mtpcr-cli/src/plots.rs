@@ -103,19 +103,44 @@ fn draw_costs<DB: DrawingBackend>(
     first: usize,
     title: &str,
 ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
-    let values = history
+    let series: Vec<Series> = (0..3)
+        .map(|k| Series {
+            label: TASK_NAMES[first + k].to_string(),
+            color: TASK_COLORS[k],
+            values: history.iter().map(|row| row[first + k]).collect(),
+        })
+        .collect();
+    draw_series(area, &series, title, (20, 17, 3))
+}
+
+/// One line of a chart: a value per generation (index 0 is the initial population).
+struct Series {
+    label: String,
+    color: RGBColor,
+    values: Vec<f64>,
+}
+
+/// Lines over generations with a legend; `(caption, legend, stroke)` sizes in pixels.
+fn draw_series<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    series: &[Series],
+    title: &str,
+    (caption_size, legend_size, stroke): (u32, u32, u32),
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    let values = series
         .iter()
-        .flat_map(|row| row[first..first + 3].iter().copied())
+        .flat_map(|s| s.values.iter().copied())
         .filter(|v| v.is_finite());
     let (lo, hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
         (lo.min(v), hi.max(v))
     });
     let (lo, hi) = if lo.is_finite() { (lo, hi) } else { (0.0, 1.0) };
     let pad = ((hi - lo) * 0.06).max(hi.abs().max(1e-12) * 0.02);
-    let last = (history.len() as i32 - 1).max(1);
+    let longest = series.iter().map(|s| s.values.len()).max().unwrap_or(0);
+    let last = (longest as i32 - 1).max(1);
     let ticks = tick_format(hi - lo + 2.0 * pad, lo.abs().max(hi.abs()));
     let mut chart = ChartBuilder::on(area)
-        .caption(title, (FONT, 20))
+        .caption(title, (FONT, caption_size))
         .margin(18)
         .margin_right(30)
         .x_label_area_size(50)
@@ -130,19 +155,16 @@ fn draw_costs<DB: DrawingBackend>(
         .y_label_formatter(&ticks)
         .light_line_style(RGBColor(235, 235, 235))
         .draw()?;
-    for k in 0..3 {
-        let color = TASK_COLORS[k];
+    for s in series {
+        let color = s.color;
         chart
             .draw_series(LineSeries::new(
-                history
-                    .iter()
-                    .enumerate()
-                    .map(|(g, row)| (g as i32, row[first + k])),
-                color.stroke_width(3),
+                s.values.iter().enumerate().map(|(g, &v)| (g as i32, v)),
+                color.stroke_width(stroke),
             ))?
-            .label(TASK_NAMES[first + k])
+            .label(s.label.clone())
             .legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 24, y)], color.stroke_width(3))
+                PathElement::new(vec![(x, y), (x + 24, y)], color.stroke_width(stroke))
             });
     }
     chart
@@ -150,9 +172,60 @@ fn draw_costs<DB: DrawingBackend>(
         .position(SeriesLabelPosition::UpperRight)
         .background_style(WHITE.mix(0.9))
         .border_style(RGBColor(160, 160, 160))
-        .label_font((FONT, 17))
+        .label_font((FONT, legend_size))
         .draw()?;
     Ok(())
+}
+
+/// One colour per method in the method-comparison chart (tab10).
+const METHOD_COLORS: [RGBColor; 8] = [
+    RGBColor(31, 119, 180),
+    RGBColor(255, 127, 14),
+    RGBColor(44, 160, 44),
+    RGBColor(214, 39, 40),
+    RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+    RGBColor(227, 119, 194),
+    RGBColor(127, 127, 127),
+];
+
+/// A convergence chart comparing methods: a 3x2 grid, row k pair k, aiding task J<k>-a on
+/// the left and original task J<k>-o on the right; one line per method (`(label, history)`,
+/// the history already averaged over runs).
+pub(crate) fn methods_convergence_png(
+    methods: &[(String, Vec<[f64; 6]>)],
+    title: &str,
+    path: &Path,
+) -> CliResult<()> {
+    if methods.iter().all(|(_, h)| h.is_empty()) {
+        return Err(Failure(format!("{}: no history to plot", path.display())));
+    }
+    render_png(path, (1400, 1500), |root| {
+        root.fill(&WHITE).map_err(text)?;
+        let root = root
+            .margin(6, 0, 0, 0)
+            .titled(title, (FONT, 26))
+            .map_err(text)?;
+        let panels = root.split_evenly((3, 2));
+        for pair in 0..3 {
+            for (col, (first, kind)) in [(0, "aiding"), (3, "original")].into_iter().enumerate() {
+                let task = first + pair;
+                let series: Vec<Series> = methods
+                    .iter()
+                    .enumerate()
+                    .map(|(m, (label, history))| Series {
+                        label: label.clone(),
+                        color: METHOD_COLORS[m % METHOD_COLORS.len()],
+                        values: history.iter().map(|row| row[task]).collect(),
+                    })
+                    .collect();
+                let caption = format!("{} ({kind} task), mean over runs", TASK_NAMES[task]);
+                draw_series(&panels[2 * pair + col], &series, &caption, (18, 14, 2))
+                    .map_err(text)?;
+            }
+        }
+        Ok(())
+    })
 }
 
 /// Tick labels for an axis spanning `span`: one number of decimals for the whole axis (enough
@@ -369,6 +442,11 @@ mod tests {
         std::fs::create_dir_all(&dir).unwrap();
         let history: Vec<[f64; 6]> = (0..6).map(|g| [1.0 / (g + 1) as f64; 6]).collect();
         convergence_png(&history, &dir.join("c.png")).unwrap();
+        let methods = vec![
+            ("a".to_string(), history.clone()),
+            ("b".to_string(), history),
+        ];
+        methods_convergence_png(&methods, "t", &dir.join("m.png")).unwrap();
         let cloud: Vec<[f64; 3]> = (0..500).map(|i| [i as f64, (i % 7) as f64, 0.5]).collect();
         let labels = ["a".to_string(), "b".to_string(), "c".to_string()];
         views_png(
@@ -378,7 +456,7 @@ mod tests {
             &dir.join("v.png"),
         )
         .unwrap();
-        for f in ["c.png", "v.png"] {
+        for f in ["c.png", "v.png", "m.png"] {
             let bytes = std::fs::read(dir.join(f)).unwrap();
             assert!(bytes.starts_with(b"\x89PNG\r\n\x1a\n"), "{f}");
         }
