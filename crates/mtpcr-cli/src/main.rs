@@ -213,7 +213,7 @@ fn register_files(
         let (i, j) = (k + 1, (k + 1) % 3 + 1);
         outln!(
             "{name} (cloud {i} -> cloud {j} frame) =\n{}",
-            output::matrix_block(&result.transforms[k])
+            mtpcr_core::io::matrix_text(&result.transforms[k])
         );
     }
     outln!(

@@ -2,8 +2,7 @@
 
 use crate::error::{CliResult, Failure};
 use crate::plots;
-use mtpcr_core::io::{matrix_rows, write_ply};
-use mtpcr_core::Transform;
+use mtpcr_core::io::{matrix_rows, matrix_text, write_ply};
 use mtpcr_core::{Config, PointCloud, Registration, TASK_NAMES};
 use std::path::{Path, PathBuf};
 
@@ -161,17 +160,6 @@ fn check_output(dir: &Path, inputs: &[PathBuf]) -> CliResult<()> {
     Ok(())
 }
 
-/// A transform as four aligned lines of text (fixed-width columns, signs lined up).
-pub fn matrix_block(t: &Transform) -> String {
-    let mut s = String::new();
-    for i in 0..4 {
-        let row: Vec<String> = (0..4).map(|j| format!("{:>13.9}", t[(i, j)])).collect();
-        s.push_str(&row.join(" "));
-        s.push('\n');
-    }
-    s
-}
-
 /// What a run used and produced, for the files.
 pub struct RunRecord<'a> {
     /// The input files, in loop order.
@@ -219,7 +207,7 @@ pub fn transforms_text(rec: &RunRecord<'_>) -> String {
         let (i, j) = (k + 1, (k + 1) % 3 + 1);
         s.push_str(&format!(
             "\n{name} (maps cloud {i} into the frame of cloud {j}):\n{}",
-            matrix_block(&rec.result.transforms[k])
+            matrix_text(&rec.result.transforms[k])
         ));
     }
     s

@@ -335,12 +335,12 @@ pub fn matrix_rows(t: &Transform) -> [[f64; 4]; 4] {
     rows
 }
 
-/// A transform as four lines of text.
+/// A transform as four aligned lines of text (fixed-width columns, signs lined up).
 pub fn matrix_text(t: &Transform) -> String {
     let mut s = String::new();
     for i in 0..4 {
-        let row: Vec<String> = (0..4).map(|j| format!("{:>14.9}", t[(i, j)])).collect();
-        s.push_str(row.join(" ").trim_start());
+        let row: Vec<String> = (0..4).map(|j| format!("{:>13.9}", t[(i, j)])).collect();
+        s.push_str(&row.join(" "));
         s.push('\n');
     }
     s
@@ -373,6 +373,17 @@ mod tests {
                 [-1e-3f32 as f64, 0.0, 7.25]
             ]
         );
+    }
+
+    #[test]
+    fn matrix_text_keeps_columns_aligned() {
+        let mut t = Transform::identity();
+        t[(1, 0)] = -0.5;
+        let text = matrix_text(&t);
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(lines.len(), 4);
+        assert!(lines.iter().all(|l| l.len() == lines[0].len()), "{text}");
+        assert!(lines[1].starts_with("  -0.500000000"), "{text}");
     }
 
     #[test]
