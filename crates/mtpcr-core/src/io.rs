@@ -383,7 +383,7 @@ mod tests {
         let lines: Vec<&str> = text.lines().collect();
         assert_eq!(lines.len(), 4);
         assert!(lines.iter().all(|l| l.len() == lines[0].len()), "{text}");
-        assert!(lines[1].starts_with("  -0.500000000"), "{text}");
+        assert!(lines[1].starts_with(" -0.500000000"), "{text}");
     }
 
     #[test]
