@@ -4,6 +4,7 @@ import re
 from pathlib import Path
 
 import mtpcr
+
 from conftest import three_views
 
 README = Path(__file__).resolve().parents[2] / "README.md"
