@@ -168,6 +168,26 @@ fn mutants(pop: &Population, elites: usize, f: f64, rng: &mut ChaCha8Rng) -> Vec
         .collect()
 }
 
+/// Records a generation's best costs in `history` and reports them to the observer; true
+/// when the observer asks to stop. Shared by MTPCR and the baselines.
+pub(crate) fn end_of_generation(
+    history: &mut Vec<[f64; 6]>,
+    best_costs: [f64; 6],
+    generation: usize,
+    generations: usize,
+    evaluations: usize,
+    observer: &mut dyn FnMut(&Progress) -> ControlFlow<()>,
+) -> bool {
+    history.push(best_costs);
+    observer(&Progress {
+        generation: generation + 1,
+        generations,
+        best_costs,
+        evaluations,
+    })
+    .is_break()
+}
+
 /// SBX spread factor for a uniform draw `u` and index `eta`.
 pub(crate) fn sbx_beta(u: f64, eta: f64) -> f64 {
     let e = 1.0 / (eta + 1.0);
@@ -364,15 +384,9 @@ fn run_mtpcr_with(
             let sc = &scores[s * 2 * n..(s + 1) * 2 * n];
             pops[s].select(kids, sc, n);
         }
-        history.push(best_costs(&pops));
         generations_run = g + 1;
-        let progress = Progress {
-            generation: g + 1,
-            generations,
-            best_costs: best_costs(&pops),
-            evaluations,
-        };
-        if observer(&progress).is_break() {
+        let best = best_costs(&pops);
+        if end_of_generation(&mut history, best, g, generations, evaluations, observer) {
             completed = g + 1 == generations;
             break;
         }

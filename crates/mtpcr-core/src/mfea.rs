@@ -45,7 +45,9 @@
 //! Children are not pruned (no early exit): whether a child survives depends on the ranks of
 //! the whole pool, so no cost limit is known in advance.
 
-use crate::evolve::{loop_term, sbx_beta, sbx_children, sbx_eta, score_all, Outcome, Tasks};
+use crate::evolve::{
+    end_of_generation, loop_term, sbx_beta, sbx_children, sbx_eta, score_all, Outcome, Tasks,
+};
 use crate::registration::{Config, Progress};
 use crate::se3::{decode, Individual, Transform};
 use rand::{RngExt, SeedableRng};
@@ -335,15 +337,9 @@ pub(crate) fn run_mfea(
             }
         }));
         pop = select(merged, size);
-        history.push(best_costs(&pop));
         generations_run = g + 1;
-        let progress = Progress {
-            generation: g + 1,
-            generations,
-            best_costs: best_costs(&pop),
-            evaluations,
-        };
-        if observer(&progress).is_break() {
+        let best = best_costs(&pop);
+        if end_of_generation(&mut history, best, g, generations, evaluations, observer) {
             completed = g + 1 == generations;
             break;
         }
