@@ -1,5 +1,6 @@
 //! `mtpcr experiment`: the paper's experiment suites (Table 2 accuracy, Table 3 noise,
-//! Table 4 solution quality with convergence figures) over problem files.
+//! Table 4 solution quality with convergence figures, and the parameter sensitivity studies of
+//! Section VI: alpha, sharing probability, sample ratio) over problem files.
 //!
 //! Every run is one JSON line of `DIR/runs.jsonl`, keyed by (suite, variant, problem, seed);
 //! a rerun skips the keys already there, so an interrupted experiment resumes. Runs execute
@@ -32,6 +33,26 @@ const PAPER_ERR_R: [(&str, f64, f64); 3] = [
 /// Noise levels of Table 3 (standard deviation in normalised coordinates).
 const NOISE_SIGMAS: [f64; 3] = [0.01, 0.02, 0.03];
 
+/// Loop-term weights of the alpha study, with the paper's Table (Err_R, Err_T x1000 on
+/// Bunny-a, Bunny-b, Bunny-c; 20 runs).
+const PAPER_ALPHA: [(f64, [(f64, f64); 3]); 6] = [
+    (0.5, [(141.06, 9.78), (1657.15, 99.23), (1622.86, 71.65)]),
+    (0.2, [(6.92, 0.27), (260.17, 15.14), (303.77, 16.59)]),
+    (0.1, [(7.22, 0.37), (105.88, 4.09), (508.85, 21.11)]),
+    (0.05, [(6.71, 0.29), (10.48, 0.67), (179.35, 9.39)]),
+    (0.02, [(8.19, 0.32), (11.18, 0.57), (188.29, 9.83)]),
+    (0.01, [(7.72, 0.32), (105.25, 5.63), (314.65, 7.81)]),
+];
+
+/// Sharing probabilities of the sharing study (p_intra = p_inter).
+const SHARING_PROBABILITIES: [f64; 7] = [0.0, 0.2, 0.4, 0.5, 0.6, 0.8, 1.0];
+
+/// Sample ratios of the sample-ratio study.
+const SAMPLE_RATIOS: [f64; 10] = [0.01, 0.02, 0.03, 0.04, 0.05, 0.1, 0.2, 0.3, 0.4, 0.5];
+
+/// The paper's Bunny problems (the alpha and sample-ratio studies use them).
+const BUNNIES: [&str; 3] = ["bunny-a", "bunny-b", "bunny-c"];
+
 /// A "No. of Best" cell counts when the method's mean is within this fraction of the best.
 const BEST_TOLERANCE: f64 = 0.01;
 
@@ -42,8 +63,16 @@ pub enum Suite {
     /// Table 4: final original-task costs of MTPCR, MFEA, G-MFEA and the ablations, with
     /// convergence figures.
     Quality,
-    /// Table 3: Err_R / Err_T under Gaussian noise (sigma 0.01, 0.02, 0.03), default settings.
+    /// Table 3: Err_R / Err_T under Gaussian noise (sigma 0.01, 0.02, 0.03), default and
+    /// paper settings.
     Noise,
+    /// Sensitivity to alpha (loop-term weight), paper settings, on Bunny-a/b/c.
+    Alpha,
+    /// Sensitivity to the sharing probabilities (p_intra = p_inter), paper settings, on
+    /// Bunny-c.
+    Sharing,
+    /// Sensitivity to the sample ratio, paper settings, on Bunny-a/b/c.
+    Sampling,
 }
 
 impl Suite {
@@ -52,13 +81,27 @@ impl Suite {
             Suite::Accuracy => "accuracy",
             Suite::Quality => "quality",
             Suite::Noise => "noise",
+            Suite::Alpha => "alpha",
+            Suite::Sharing => "sharing",
+            Suite::Sampling => "sampling",
         }
     }
 
+    /// Runs per problem and variant, as in the paper.
     fn default_runs(self) -> usize {
         match self {
-            Suite::Quality => 20,
-            Suite::Accuracy | Suite::Noise => 10,
+            Suite::Quality | Suite::Alpha | Suite::Sharing => 20,
+            Suite::Accuracy | Suite::Noise | Suite::Sampling => 10,
+        }
+    }
+
+    /// The problems the paper ran the suite on (used unless `--problems` is given); `None`:
+    /// every problem.
+    fn paper_problems(self) -> Option<&'static [&'static str]> {
+        match self {
+            Suite::Alpha | Suite::Sampling => Some(&BUNNIES),
+            Suite::Sharing => Some(&BUNNIES[2..]),
+            Suite::Accuracy | Suite::Quality | Suite::Noise => None,
         }
     }
 
@@ -120,13 +163,66 @@ impl Suite {
                     },
                 ),
             ],
-            Suite::Noise => NOISE_SIGMAS
+            Suite::Noise => {
+                let noisy = |key: String, label: String, config: Config, sigma: f64| Variant {
+                    key,
+                    label,
+                    config,
+                    noise: Some(sigma),
+                };
+                let default = NOISE_SIGMAS.iter().map(|&s| {
+                    noisy(
+                        format!("noise-{s:.2}"),
+                        format!("default, sigma {s:.2}"),
+                        Config::default(),
+                        s,
+                    )
+                });
+                let paper_noise = NOISE_SIGMAS.iter().map(|&s| {
+                    noisy(
+                        format!("noise-paper-{s:.2}"),
+                        format!("paper, sigma {s:.2}"),
+                        paper(),
+                        s,
+                    )
+                });
+                default.chain(paper_noise).collect()
+            }
+            Suite::Alpha => PAPER_ALPHA
                 .iter()
-                .map(|&s| Variant {
-                    key: format!("noise-{s:.2}"),
-                    label: format!("sigma {s:.2}"),
-                    config: Config::default(),
-                    noise: Some(s),
+                .map(|&(alpha, _)| {
+                    with(
+                        &format!("alpha-{alpha}"),
+                        &format!("alpha {alpha}"),
+                        Config { alpha, ..paper() },
+                    )
+                })
+                .collect(),
+            Suite::Sharing => SHARING_PROBABILITIES
+                .iter()
+                .map(|&p| {
+                    with(
+                        &format!("sharing-{p:.1}"),
+                        &format!("p {p:.1}"),
+                        Config {
+                            p_intra: p,
+                            p_inter: p,
+                            ..paper()
+                        },
+                    )
+                })
+                .collect(),
+            Suite::Sampling => SAMPLE_RATIOS
+                .iter()
+                .map(|&r| {
+                    with(
+                        &format!("ratio-{r}"),
+                        &format!("ratio {r}"),
+                        Config {
+                            sample_ratio: r,
+                            ..paper()
+                        },
+                    )
                 })
                 .collect(),
         }
@@ -143,7 +239,8 @@ struct Variant {
 /// Arguments of `mtpcr experiment`.
 #[derive(Args, Clone, Debug)]
 pub struct ExperimentArgs {
-    /// Suites to run: accuracy (Table 2), quality (Table 4), noise (Table 3).
+    /// Suites to run: accuracy (Table 2), quality (Table 4), noise (Table 3), and the
+    /// sensitivity studies alpha, sharing, sampling.
     #[arg(required = true, value_enum, value_name = "SUITE")]
     pub suites: Vec<Suite>,
     /// Output folder: runs.jsonl (one line per run, resumable), RESULTS.md, figures.
@@ -153,7 +250,8 @@ pub struct ExperimentArgs {
     /// quality].
     #[arg(long, value_name = "N")]
     pub runs: Option<usize>,
-    /// Problem files [default: ../shared/problems/*.json, sorted].
+    /// Problem files, for every suite [default: ../shared/problems/*.json, sorted; the
+    /// sensitivity suites use the paper's Bunny problems among them].
     #[arg(long, value_name = "FILE", num_args = 1..)]
     pub problems: Vec<PathBuf>,
     /// Folder the scan paths are relative to [default: the parent of each problem's folder].
@@ -388,6 +486,14 @@ pub fn run(args: &ExperimentArgs) -> CliResult<()> {
         let runs = args.runs.unwrap_or_else(|| suite.default_runs());
         for (vi, v) in variants[&suite].iter().enumerate() {
             for (pi, p) in problems.iter().enumerate() {
+                let name = &p.problem.name;
+                if args.problems.is_empty()
+                    && suite
+                        .paper_problems()
+                        .is_some_and(|names| !names.contains(&name.as_str()))
+                {
+                    continue;
+                }
                 for seed in 0..runs as u64 {
                     let key = (
                         suite.name().to_string(),
@@ -620,27 +726,58 @@ fn machine() -> String {
     )
 }
 
-fn accuracy_rows(
+/// A column of published numbers beside ours: header, and the cell for (variant, problem).
+type PaperColumn<'a> = (&'a str, &'a dyn Fn(&Variant, &str) -> String);
+
+fn median(values: &[f64]) -> f64 {
+    let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    let m = v.len() / 2;
+    if v.len() % 2 == 1 {
+        v[m]
+    } else {
+        0.5 * (v[m - 1] + v[m])
+    }
+}
+
+/// The problems with at least one record of the suite.
+fn problems_in<'a>(
+    records: &BTreeMap<Key, RunLine>,
+    suite: Suite,
+    problems: &'a [LoadedProblem],
+) -> Vec<&'a LoadedProblem> {
+    problems
+        .iter()
+        .filter(|p| {
+            records
+                .values()
+                .any(|r| r.suite == suite.name() && r.problem == p.problem.name)
+        })
+        .collect()
+}
+
+/// Err_R / Err_T rows, problem-major: successes, mean ± std and median over the runs.
+fn error_table(
     md: &mut String,
     suite: Suite,
     variants: &[Variant],
-    problems: &[LoadedProblem],
+    problems: &[&LoadedProblem],
     records: &BTreeMap<Key, RunLine>,
-    with_paper: bool,
+    paper: Option<PaperColumn<'_>>,
 ) {
-    let paper_col = if with_paper {
-        " Paper MTPCR Err_R ×1000 |"
-    } else {
-        ""
-    };
+    let paper_col = paper.map_or(String::new(), |(h, _)| format!(" {h} |"));
     let _ = writeln!(
         md,
-        "| problem | variant | runs | successes | Err_R ×1000 | Err_T ×1000 |{paper_col} mean s/run |"
+        "| problem | variant | runs | successes | Err_R ×1000 | Err_T ×1000 | median Err_R \
+         ×1000 |{paper_col} mean s/run |"
     );
     let _ = writeln!(
         md,
-        "|---|---|---:|---:|---:|---:|{}---:|",
-        if with_paper { "---:|" } else { "" }
+        "|---|---|---:|---:|---:|---:|---:|{}---:|",
+        if paper.is_some() { "---:|" } else { "" }
     );
     for p in problems {
         let name = &p.problem.name;
@@ -650,18 +787,15 @@ fn accuracy_rows(
             let et: Vec<f64> = rs.iter().map(|r| r.err_t).collect();
             let secs: Vec<f64> = rs.iter().map(|r| r.seconds).collect();
             let ok = rs.iter().filter(|r| r.success).count();
-            let paper = if with_paper {
-                let val = PAPER_ERR_R
-                    .iter()
-                    .find(|(n, _, _)| n.eq_ignore_ascii_case(name))
-                    .map_or("–".to_string(), |(_, m, s)| format!("{m:.2} ± {s:.2}"));
-                format!(" {val} |")
+            let paper = paper.map_or(String::new(), |(_, f)| format!(" {} |", f(v, name)));
+            let med = if er.is_empty() {
+                "–".to_string()
             } else {
-                String::new()
+                format!("{:.2}", median(&er) * 1000.0)
             };
             let _ = writeln!(
                 md,
-                "| {name} | {} | {} | {ok}/{} | {} | {} |{paper} {:.1} |",
+                "| {name} | {} | {} | {ok}/{} | {} | {} | {med} |{paper} {:.1} |",
                 v.label,
                 rs.len(),
                 rs.len(),
@@ -671,6 +805,43 @@ fn accuracy_rows(
             );
         }
     }
+}
+
+/// One convergence figure per problem (`<prefix><problem>.png`), a line per variant, and
+/// its Markdown link.
+fn convergence_figures(
+    md: &mut String,
+    out: &Path,
+    (prefix, what): (&str, &str),
+    suite: Suite,
+    variants: &[Variant],
+    problems: &[&LoadedProblem],
+    records: &BTreeMap<Key, RunLine>,
+) -> CliResult<()> {
+    for p in problems {
+        let name = &p.problem.name;
+        let lines: Vec<(String, Vec<[f64; 6]>)> = variants
+            .iter()
+            .map(|v| {
+                (
+                    v.label.clone(),
+                    mean_history(&cell(records, suite, &v.key, name)),
+                )
+            })
+            .filter(|(_, h)| !h.is_empty())
+            .collect();
+        if lines.is_empty() {
+            continue;
+        }
+        let file = format!("{prefix}{name}.png");
+        plots::methods_convergence_png(
+            &lines,
+            &format!("{name}: best cost per generation, mean over runs, by {what}"),
+            &out.join(&file),
+        )?;
+        let _ = writeln!(md, "![{name} convergence by {what}]({file})\n");
+    }
+    Ok(())
 }
 
 /// Mean over runs of the history rows (cut to the shortest history).
@@ -689,16 +860,18 @@ fn quality_section(
     md: &mut String,
     out: &Path,
     variants: &[Variant],
-    problems: &[LoadedProblem],
+    problems: &[&LoadedProblem],
     records: &BTreeMap<Key, RunLine>,
 ) -> CliResult<()> {
     let suite = Suite::Quality;
     let _ = writeln!(
         md,
         "Final best cost of each original task (1 − inlier fraction + loop term; lower is \
-         better), as best / mean ± std over the runs. All methods use `Config::paper()` apart \
-         from the method or the sharing probabilities. **No. of Best**: cells where the \
-         method's mean is the best or within {:.0} % of it.\n",
+         better), as B.Cost (the lowest over the runs) / Avg.Cost (mean ± std over the runs). \
+         All methods use `Config::paper()` apart from the method or the sharing \
+         probabilities. As in the paper, a B.Cost or an Avg.Cost is **bold** when it is the \
+         best of its row or within {:.0} % of it; **No. of Best** counts the bold B.Cost / \
+         Avg.Cost cells of each method.\n",
         BEST_TOLERANCE * 100.0
     );
     let mut header = "| problem | task | runs |".to_string();
@@ -708,7 +881,11 @@ fn quality_section(
         rule.push_str("---:|");
     }
     let _ = writeln!(md, "{header}\n{rule}");
-    let mut wins = vec![0usize; variants.len()];
+    let near_best =
+        |value: f64, best: f64| best.is_finite() && value <= best + BEST_TOLERANCE * best.abs();
+    let bold = |text: String, on: bool| if on { format!("**{text}**") } else { text };
+    // Per method: bold B.Cost cells, bold Avg.Cost cells.
+    let mut wins = vec![(0usize, 0usize); variants.len()];
     for p in problems {
         let name = &p.problem.name;
         let cells: Vec<Vec<&RunLine>> = variants
@@ -720,12 +897,18 @@ fn quality_section(
                 .iter()
                 .map(|rs| rs.iter().map(|r| r.final_costs.original[task]).collect())
                 .collect();
-            let means: Vec<f64> = costs.iter().map(|c| mean_std(c).0).collect();
-            let best = means
+            let lowest: Vec<f64> = costs
                 .iter()
-                .copied()
-                .filter(|m| m.is_finite())
-                .fold(f64::INFINITY, f64::min);
+                .map(|c| c.iter().copied().fold(f64::INFINITY, f64::min))
+                .collect();
+            let means: Vec<f64> = costs.iter().map(|c| mean_std(c).0).collect();
+            let best_of = |xs: &[f64]| {
+                xs.iter()
+                    .copied()
+                    .filter(|m| m.is_finite())
+                    .fold(f64::INFINITY, f64::min)
+            };
+            let (best_lowest, best_mean) = (best_of(&lowest), best_of(&means));
             let runs = cells.iter().map(Vec::len).max().unwrap_or(0);
             let mut row = format!("| {name} | {} | {runs} |", TASK_NAMES[3 + task]);
             for (m, c) in costs.iter().enumerate() {
@@ -733,24 +916,25 @@ fn quality_section(
                     row.push_str(" – |");
                     continue;
                 }
-                let lowest = c.iter().copied().fold(f64::INFINITY, f64::min);
-                let is_best = best.is_finite() && means[m] <= best + BEST_TOLERANCE * best.abs();
-                if is_best {
-                    wins[m] += 1;
-                }
-                let text = format!("{lowest:.4} / {}", pm(c, 1.0, 4));
-                if is_best {
-                    let _ = write!(row, " **{text}** |");
-                } else {
-                    let _ = write!(row, " {text} |");
-                }
+                let (b, a) = (
+                    near_best(lowest[m], best_lowest),
+                    near_best(means[m], best_mean),
+                );
+                wins[m].0 += usize::from(b);
+                wins[m].1 += usize::from(a);
+                let _ = write!(
+                    row,
+                    " {} / {} |",
+                    bold(format!("{:.4}", lowest[m]), b),
+                    bold(pm(c, 1.0, 4), a)
+                );
             }
             let _ = writeln!(md, "{row}");
         }
     }
-    let mut row = "| **No. of Best** | | |".to_string();
-    for w in &wins {
-        let _ = write!(row, " {w} |");
+    let mut row = "| **No. of Best** (B.Cost / Avg.Cost) | | |".to_string();
+    for (b, a) in &wins {
+        let _ = write!(row, " {b} / {a} |");
     }
     let _ = writeln!(md, "{row}\n");
 
@@ -759,29 +943,163 @@ fn quality_section(
         "Convergence: mean over the runs of the best cost per generation of the six tasks \
          (generation 0 is the initial population); aiding tasks left, original right.\n"
     );
-    for p in problems {
-        let name = &p.problem.name;
-        let methods: Vec<(String, Vec<[f64; 6]>)> = variants
+    convergence_figures(
+        md,
+        out,
+        ("convergence-", "method"),
+        suite,
+        variants,
+        problems,
+        records,
+    )
+}
+
+/// The alpha study: the error table beside the paper's, and convergence by alpha.
+fn alpha_section(
+    md: &mut String,
+    out: &Path,
+    variants: &[Variant],
+    problems: &[&LoadedProblem],
+    records: &BTreeMap<Key, RunLine>,
+) -> CliResult<()> {
+    let suite = Suite::Alpha;
+    let _ = writeln!(
+        md,
+        "`Config::paper()` with the loop-term weight alpha changed (paper: 0.05). The paper \
+         column is its Table of average errors (Err_R / Err_T ×1000, 20 runs).\n"
+    );
+    let paper = |v: &Variant, name: &str| {
+        let Some(k) = BUNNIES.iter().position(|b| b.eq_ignore_ascii_case(name)) else {
+            return "–".to_string();
+        };
+        PAPER_ALPHA
             .iter()
-            .map(|v| {
-                (
-                    v.label.clone(),
-                    mean_history(&cell(records, suite, &v.key, name)),
-                )
+            .find(|(a, _)| *a == v.config.alpha)
+            .map_or("–".to_string(), |(_, e)| {
+                format!("{:.2} / {:.2}", e[k].0, e[k].1)
             })
-            .filter(|(_, h)| !h.is_empty())
-            .collect();
-        if methods.is_empty() {
-            continue;
-        }
-        let file = format!("convergence-{name}.png");
-        plots::methods_convergence_png(
-            &methods,
-            &format!("{name}: best cost per generation, mean over runs"),
-            &out.join(&file),
-        )?;
-        let _ = writeln!(md, "![{name} convergence]({file})\n");
+    };
+    error_table(
+        md,
+        suite,
+        variants,
+        problems,
+        records,
+        Some(("paper Err_R / Err_T ×1000", &paper)),
+    );
+    md.push('\n');
+    convergence_figures(
+        md,
+        out,
+        ("alpha-convergence-", "alpha"),
+        suite,
+        variants,
+        problems,
+        records,
+    )
+}
+
+/// The sharing-probability study: errors and convergence by p_intra = p_inter.
+fn sharing_section(
+    md: &mut String,
+    out: &Path,
+    variants: &[Variant],
+    problems: &[&LoadedProblem],
+    records: &BTreeMap<Key, RunLine>,
+) -> CliResult<()> {
+    let suite = Suite::Sharing;
+    let _ = writeln!(
+        md,
+        "`Config::paper()` with p_intra = p_inter = p (paper: 0.5; 0 is MTPCR-NKS). The paper \
+         shows only the convergence curves (Bunny-c, 20 runs).\n"
+    );
+    error_table(md, suite, variants, problems, records, None);
+    md.push('\n');
+    convergence_figures(
+        md,
+        out,
+        ("sharing-convergence-", "sharing probability"),
+        suite,
+        variants,
+        problems,
+        records,
+    )
+}
+
+/// The sample-ratio study: errors by ratio, as a table and a chart (a line per problem).
+fn sampling_section(
+    md: &mut String,
+    out: &Path,
+    variants: &[Variant],
+    problems: &[&LoadedProblem],
+    records: &BTreeMap<Key, RunLine>,
+) -> CliResult<()> {
+    let suite = Suite::Sampling;
+    let _ = writeln!(
+        md,
+        "`Config::paper()` with the farthest-point sample ratio changed (paper: 0.05); eps \
+         follows the sampled clouds. The paper shows Err_R and Err_T against the ratio as a \
+         figure without numbers.\n"
+    );
+    error_table(md, suite, variants, problems, records, None);
+    md.push('\n');
+    if problems.is_empty() {
+        return Ok(());
     }
+    let x_labels: Vec<String> = variants
+        .iter()
+        .map(|v| format!("{}", v.config.sample_ratio))
+        .collect();
+    let by_problem = |measure: fn(&RunLine) -> f64, average: fn(&[f64]) -> f64| {
+        problems
+            .iter()
+            .map(|p| {
+                let name = &p.problem.name;
+                let values = variants
+                    .iter()
+                    .map(|v| {
+                        let xs: Vec<f64> = cell(records, suite, &v.key, name)
+                            .iter()
+                            .map(|r| measure(r) * 1000.0)
+                            .collect();
+                        if xs.is_empty() {
+                            f64::NAN
+                        } else {
+                            average(&xs)
+                        }
+                    })
+                    .collect();
+                (name.clone(), values)
+            })
+            .collect::<Vec<_>>()
+    };
+    let mean = |xs: &[f64]| mean_std(xs).0;
+    let panels = vec![
+        plots::CategoryPanel {
+            title: "Err_R ×1000, mean over runs".to_string(),
+            y_desc: "Err_R ×1000 (log)".to_string(),
+            series: by_problem(|r| r.err_r, mean),
+        },
+        plots::CategoryPanel {
+            title: "Err_T ×1000, mean over runs".to_string(),
+            y_desc: "Err_T ×1000 (log)".to_string(),
+            series: by_problem(|r| r.err_t, mean),
+        },
+        plots::CategoryPanel {
+            title: "Err_R ×1000, median over runs".to_string(),
+            y_desc: "Err_R ×1000 (log)".to_string(),
+            series: by_problem(|r| r.err_r, median),
+        },
+    ];
+    let file = "sampling-errors.png";
+    plots::categories_log_png(
+        "sample ratio",
+        &x_labels,
+        &panels,
+        "Registration errors by sample ratio (Config::paper() otherwise)",
+        &out.join(file),
+    )?;
+    let _ = writeln!(md, "![errors by sample ratio]({file})\n");
     Ok(())
 }
 
@@ -849,6 +1167,7 @@ fn write_report(
 
     for &suite in suites {
         let vs = &variants[&suite];
+        let ps = problems_in(records, suite, problems);
         match suite {
             Suite::Accuracy => {
                 let _ = writeln!(md, "## Accuracy (paper Table 2)\n");
@@ -859,7 +1178,20 @@ fn write_report(
                      succeeds when every pair is within 5°. The paper column is the published \
                      MTPCR Err_R ×1000.\n"
                 );
-                accuracy_rows(&mut md, suite, vs, problems, records, true);
+                let paper = |_: &Variant, name: &str| {
+                    PAPER_ERR_R
+                        .iter()
+                        .find(|(n, _, _)| n.eq_ignore_ascii_case(name))
+                        .map_or("–".to_string(), |(_, m, s)| format!("{m:.2} ± {s:.2}"))
+                };
+                error_table(
+                    &mut md,
+                    suite,
+                    vs,
+                    &ps,
+                    records,
+                    Some(("paper MTPCR Err_R ×1000", &paper)),
+                );
                 md.push('\n');
             }
             Suite::Noise => {
@@ -868,21 +1200,35 @@ fn write_report(
                     md,
                     "Gaussian noise of the given sigma added to every scan in normalised \
                      coordinates (`PointCloud::with_normalized_noise`, seeded from the run \
-                     seed) before the run; `Config::default()`.\n"
+                     seed) before the run; `Config::default()` and `Config::paper()`.\n"
                 );
-                accuracy_rows(&mut md, suite, vs, problems, records, false);
+                error_table(&mut md, suite, vs, &ps, records, None);
                 md.push('\n');
             }
             Suite::Quality => {
                 let _ = writeln!(md, "## Solution quality (paper Table 4)\n");
-                quality_section(&mut md, &args.out, vs, problems, records)?;
+                quality_section(&mut md, &args.out, vs, &ps, records)?;
+            }
+            Suite::Alpha => {
+                let _ = writeln!(md, "## Sensitivity to alpha (paper Section VI)\n");
+                alpha_section(&mut md, &args.out, vs, &ps, records)?;
+            }
+            Suite::Sharing => {
+                let _ = writeln!(
+                    md,
+                    "## Sensitivity to the sharing probabilities (paper Section VI)\n"
+                );
+                sharing_section(&mut md, &args.out, vs, &ps, records)?;
+            }
+            Suite::Sampling => {
+                let _ = writeln!(
+                    md,
+                    "## Sensitivity to the sample ratio (paper Section VI)\n"
+                );
+                sampling_section(&mut md, &args.out, vs, &ps, records)?;
             }
         }
     }
-    let _ = writeln!(
-        md,
-        "Not included: the parameter sensitivity studies of the paper (next step)."
-    );
     let path = args.out.join("RESULTS.md");
     std::fs::write(&path, md).map_err(|e| Failure(format!("{}: {e}", path.display())))?;
     Ok(path)
@@ -925,7 +1271,8 @@ mod tests {
 
     #[test]
     fn variants_have_distinct_keys_and_valid_settings() {
-        for s in [Suite::Accuracy, Suite::Quality, Suite::Noise] {
+        for s in Suite::value_variants() {
+            let s = *s;
             let vs = s.variants();
             let keys: HashSet<&str> = vs.iter().map(|v| v.key.as_str()).collect();
             assert_eq!(keys.len(), vs.len());
@@ -935,5 +1282,17 @@ mod tests {
         }
         assert_eq!(Suite::Quality.variants().len(), 6);
         assert_eq!(Suite::Noise.variants()[1].key, "noise-0.02");
+        assert_eq!(Suite::Noise.variants()[4].key, "noise-paper-0.02");
+        assert_eq!(Suite::Alpha.variants()[3].config.alpha, 0.05);
+        assert_eq!(Suite::Sampling.variants()[9].config.sample_ratio, 0.5);
+        let sharing = &Suite::Sharing.variants()[2].config;
+        assert_eq!((sharing.p_intra, sharing.p_inter), (0.4, 0.4));
+    }
+
+    #[test]
+    fn median_of_even_and_odd_counts() {
+        assert_eq!(median(&[3.0, 1.0, 2.0]), 2.0);
+        assert_eq!(median(&[4.0, 1.0, 2.0, 3.0]), 2.5);
+        assert!(median(&[]).is_nan());
     }
 }

@@ -228,6 +228,113 @@ pub(crate) fn methods_convergence_png(
     })
 }
 
+/// One panel of [`categories_log_png`]: a line per `(label, one value per category)`.
+pub(crate) struct CategoryPanel {
+    pub title: String,
+    pub y_desc: String,
+    pub series: Vec<(String, Vec<f64>)>,
+}
+
+/// A sensitivity chart: one panel per measure, one line per series, x the categories
+/// `x_labels` evenly spaced, y logarithmic (errors of failed runs are orders of magnitude
+/// above the others). Values <= 0 or not finite are left out.
+pub(crate) fn categories_log_png(
+    x_desc: &str,
+    x_labels: &[String],
+    panels: &[CategoryPanel],
+    title: &str,
+    path: &Path,
+) -> CliResult<()> {
+    let positive = |v: &f64| v.is_finite() && *v > 0.0;
+    if x_labels.is_empty()
+        || !panels
+            .iter()
+            .any(|p| p.series.iter().any(|(_, vs)| vs.iter().any(positive)))
+    {
+        return Err(Failure(format!("{}: nothing to plot", path.display())));
+    }
+    let width = 700 * panels.len().max(1) as u32;
+    render_png(path, (width, 620), |root| {
+        root.fill(&WHITE).map_err(text)?;
+        let root = root
+            .margin(6, 0, 0, 0)
+            .titled(title, (FONT, 26))
+            .map_err(text)?;
+        let areas = root.split_evenly((1, panels.len()));
+        for (area, panel) in areas.iter().zip(panels) {
+            let (caption, y_desc, series) = (&panel.title, &panel.y_desc, &panel.series);
+            let values = series.iter().flat_map(|(_, vs)| vs.iter().copied());
+            let (lo, hi) = values
+                .filter(positive)
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+                    (lo.min(v), hi.max(v))
+                });
+            let (lo, hi) = if lo.is_finite() {
+                (lo / 1.5, hi * 1.5)
+            } else {
+                (0.1, 10.0)
+            };
+            let last = x_labels.len() as i32 - 1;
+            let labels = x_labels.to_vec();
+            let mut chart = ChartBuilder::on(area)
+                .caption(caption, (FONT, 20))
+                .margin(18)
+                .margin_right(30)
+                .x_label_area_size(50)
+                .y_label_area_size(85)
+                .build_cartesian_2d(-0.3f64..last as f64 + 0.3, (lo..hi).log_scale())
+                .map_err(text)?;
+            chart
+                .configure_mesh()
+                .x_desc(x_desc)
+                .y_desc(y_desc.as_str())
+                .axis_desc_style((FONT, 18))
+                .label_style((FONT, 15))
+                .x_labels(x_labels.len())
+                .x_label_formatter(&|x: &f64| {
+                    let i = x.round();
+                    if (x - i).abs() < 1e-6 && i >= 0.0 && (i as usize) < labels.len() {
+                        labels[i as usize].clone()
+                    } else {
+                        String::new()
+                    }
+                })
+                .y_label_formatter(&|v: &f64| format!("{v}"))
+                .light_line_style(RGBColor(235, 235, 235))
+                .draw()
+                .map_err(text)?;
+            for (m, (label, vs)) in series.iter().enumerate() {
+                let color = METHOD_COLORS[m % METHOD_COLORS.len()];
+                let points: Vec<(f64, f64)> = vs
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, v)| positive(v))
+                    .map(|(i, &v)| (i as f64, v))
+                    .collect();
+                chart
+                    .draw_series(LineSeries::new(points.clone(), color.stroke_width(2)))
+                    .map_err(text)?
+                    .label(label.clone())
+                    .legend(move |(x, y)| {
+                        PathElement::new(vec![(x, y), (x + 24, y)], color.stroke_width(2))
+                    });
+                chart
+                    .draw_series(points.iter().map(|&p| Circle::new(p, 4, color.filled())))
+                    .map_err(text)?;
+            }
+            chart
+                .configure_series_labels()
+                .position(SeriesLabelPosition::UpperRight)
+                .background_style(WHITE.mix(0.9))
+                .border_style(RGBColor(160, 160, 160))
+                .label_font((FONT, 15))
+                .draw()
+                .map_err(text)?;
+        }
+        Ok(())
+    })
+}
+
 /// Tick labels for an axis spanning `span`: one number of decimals for the whole axis (enough
 /// for about ten ticks), scientific notation for very small or large values, and a clean `0`
 /// for rounding noise.
@@ -447,6 +554,21 @@ mod tests {
             ("b".to_string(), history),
         ];
         methods_convergence_png(&methods, "t", &dir.join("m.png")).unwrap();
+        let labels: Vec<String> = ["0.01", "0.1", "0.5"].map(String::from).to_vec();
+        let panel = |name: &str| CategoryPanel {
+            title: name.to_string(),
+            y_desc: "error".to_string(),
+            series: vec![("p".to_string(), vec![900.0, 2.0, 1.5])],
+        };
+        categories_log_png(
+            "ratio",
+            &labels,
+            &[panel("R"), panel("T")],
+            "t",
+            &dir.join("s.png"),
+        )
+        .unwrap();
+        assert!(categories_log_png("ratio", &labels, &[], "t", &dir.join("none.png")).is_err());
         let cloud: Vec<[f64; 3]> = (0..500).map(|i| [i as f64, (i % 7) as f64, 0.5]).collect();
         let labels = ["a".to_string(), "b".to_string(), "c".to_string()];
         views_png(
@@ -456,7 +578,7 @@ mod tests {
             &dir.join("v.png"),
         )
         .unwrap();
-        for f in ["c.png", "v.png", "m.png"] {
+        for f in ["c.png", "v.png", "m.png", "s.png"] {
             let bytes = std::fs::read(dir.join(f)).unwrap();
             assert!(bytes.starts_with(b"\x89PNG\r\n\x1a\n"), "{f}");
         }

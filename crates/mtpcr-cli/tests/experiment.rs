@@ -15,28 +15,29 @@ fn lines(path: &Path) -> Vec<serde_json::Value> {
         .collect()
 }
 
-#[test]
-fn quality_suite_writes_runs_report_and_figure_and_resumes() {
-    let dir = tempfile::tempdir().unwrap();
+/// Writes a synthetic problem file (three PLYs and the poses) into `dir`.
+fn synthetic_problem(dir: &Path) -> std::path::PathBuf {
     let problem = synthetic::three_views(5, 3000);
     for (i, c) in problem.clouds.iter().enumerate() {
-        write_ply(
-            dir.path().join(format!("view{}.ply", i + 1)),
-            c.points(),
-            None,
-        )
-        .unwrap();
+        write_ply(dir.join(format!("view{}.ply", i + 1)), c.points(), None).unwrap();
     }
     // T_ij = pose_j^-1 pose_i: pose_1 = I, pose_2 = T12^-1, pose_3 = T31 close the loop.
     let truth = problem.ground_truth;
     let poses = [Transform::identity(), invert_rigid(&truth[0]), truth[2]];
-    let file = dir.path().join("synthetic.json");
+    let file = dir.join("synthetic.json");
     let json = serde_json::json!({
         "name": "synthetic",
         "scans": ["view1.ply", "view2.ply", "view3.ply"],
         "poses": poses.iter().map(matrix_rows).collect::<Vec<_>>(),
     });
     std::fs::write(&file, json.to_string()).unwrap();
+    file
+}
+
+#[test]
+fn quality_suite_writes_runs_report_and_figure_and_resumes() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = synthetic_problem(dir.path());
     let out = dir.path().join("exp");
 
     let run = || {
@@ -84,4 +85,59 @@ fn quality_suite_writes_runs_report_and_figure_and_resumes() {
     assert_eq!(std::fs::read_to_string(&runs).unwrap(), before);
     let report = std::fs::read_to_string(out.join("RESULTS.md")).unwrap();
     assert!(report.contains("12 reused"), "{report}");
+}
+
+#[test]
+fn sensitivity_suites_write_their_variants_tables_and_figures() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = synthetic_problem(dir.path());
+    let out = dir.path().join("exp");
+    Command::new(env!("CARGO_BIN_EXE_mtpcr"))
+        .args(["experiment", "alpha", "sharing", "sampling", "--problems"])
+        .arg(&file)
+        .arg("--data-root")
+        .arg(dir.path())
+        .args(["--runs", "1", "--generations", "2", "--quiet", "--out"])
+        .arg(&out)
+        .assert()
+        .success();
+    let runs = lines(&out.join("runs.jsonl"));
+    let count = |suite: &str| runs.iter().filter(|l| l["suite"] == suite).count();
+    assert_eq!(
+        (count("alpha"), count("sharing"), count("sampling")),
+        (6, 7, 10)
+    );
+    let ratio = runs
+        .iter()
+        .find(|l| l["variant"] == "ratio-0.2")
+        .expect("the 0.2 sample-ratio run");
+    assert_eq!(ratio["settings"]["sample_ratio"], 0.2);
+    let p = runs
+        .iter()
+        .find(|l| l["variant"] == "sharing-0.8")
+        .expect("the p = 0.8 sharing run");
+    assert_eq!(
+        (&p["settings"]["p_intra"], &p["settings"]["p_inter"]),
+        (&serde_json::json!(0.8), &serde_json::json!(0.8))
+    );
+    let report = std::fs::read_to_string(out.join("RESULTS.md")).unwrap();
+    for needle in [
+        "## Sensitivity to alpha",
+        "## Sensitivity to the sharing probabilities",
+        "## Sensitivity to the sample ratio",
+        "| synthetic | alpha 0.5 | 1 |",
+        "| synthetic | p 0.0 | 1 |",
+        "| synthetic | ratio 0.01 | 1 |",
+    ] {
+        assert!(report.contains(needle), "{needle} missing from:\n{report}");
+    }
+    for png in [
+        "alpha-convergence-synthetic.png",
+        "sharing-convergence-synthetic.png",
+        "sampling-errors.png",
+    ] {
+        assert!(report.contains(png), "{png} not linked");
+        let bytes = std::fs::read(out.join(png)).unwrap();
+        assert!(bytes.starts_with(b"\x89PNG\r\n\x1a\n"), "{png}");
+    }
 }
