@@ -182,3 +182,49 @@ fn refinement_improves_precision() {
     );
     assert!(b.rot_deg.iter().all(|&d| d < 0.2), "{:?}", b.rot_deg);
 }
+
+#[test]
+fn refine_pulls_a_rough_guess_onto_the_truth_and_closes_the_loop() {
+    use mtpcr_core::se3::decode;
+    use mtpcr_core::PreparedProblem;
+    let problem = synthetic::three_views(4, 20_000);
+    let config = Config::default();
+    let prepared = PreparedProblem::new(&problem.clouds, &config).unwrap();
+    let truth = problem.ground_truth;
+    // A guess 1-2 degrees and a few thousandths of the shape size off on each pair.
+    let nudges = [
+        [1.5, -1.0, 0.5, 0.002, -0.001, 0.001],
+        [-0.8, 1.2, -1.0, -0.001, 0.002, 0.0],
+        [0.6, 0.4, 1.8, 0.0, 0.001, -0.002],
+    ];
+    let guess: [Transform; 3] = std::array::from_fn(|j| decode(&nudges[j]) * truth[j]);
+    let before = score(&guess, &truth);
+    assert!(
+        before.rot_deg.iter().all(|&d| d > 0.5),
+        "{:?}",
+        before.rot_deg
+    );
+    let refined = prepared.refine(&guess, &config).unwrap();
+    let after = score(&refined, &truth);
+    assert!(
+        after.rot_deg.iter().all(|&d| d < 0.1),
+        "{:?}",
+        after.rot_deg
+    );
+    let around = refined[2] * refined[1] * refined[0];
+    assert!((around - Transform::identity()).norm() < 1e-9);
+
+    let none = Config {
+        refine_iterations: 0,
+        ..config.clone()
+    };
+    let err = prepared.refine(&guess, &none).unwrap_err().to_string();
+    assert!(err.contains("refine_iterations"), "{err}");
+    let mut bad = guess;
+    bad[1][(0, 3)] = f64::NAN;
+    let err = prepared.refine(&bad, &config).unwrap_err().to_string();
+    assert!(err.contains("T23") && err.contains("non-finite"), "{err}");
+    let unprepared = PreparedProblem::new(&problem.clouds, &none).unwrap();
+    let err = unprepared.refine(&guess, &config).unwrap_err().to_string();
+    assert!(err.contains("prepared without refinement"), "{err}");
+}

@@ -266,6 +266,10 @@ pub struct ExperimentArgs {
     /// No progress display on stderr.
     #[arg(long, short)]
     pub quiet: bool,
+    /// Compute nothing: write RESULTS.md from the runs already in runs.jsonl (every table
+    /// says how many runs each cell holds).
+    #[arg(long)]
+    pub report_only: bool,
 }
 
 /// Final best costs of a run.
@@ -517,13 +521,22 @@ pub fn run(args: &ExperimentArgs) -> CliResult<()> {
     let skipped = plan.len() - pending.len();
     if !args.quiet {
         eprintln!(
-            "experiment: {} runs planned, {skipped} already in {}, {} to do with {} jobs",
+            "experiment: {} runs planned, {skipped} already in {}, {} to do{}",
             plan.len(),
             runs_path.display(),
             pending.len(),
-            args.jobs
+            if args.report_only {
+                " (not run: --report-only)".to_string()
+            } else {
+                format!(" with {} jobs", args.jobs)
+            }
         );
     }
+    let missing = if args.report_only {
+        std::mem::take(&mut pending).len()
+    } else {
+        0
+    };
     let needed: HashSet<usize> = pending.iter().map(|w| w.problem).collect();
     for (pi, p) in problems.iter_mut().enumerate() {
         if needed.contains(&pi) {
@@ -553,6 +566,7 @@ pub fn run(args: &ExperimentArgs) -> CliResult<()> {
         wall,
         computed,
         skipped,
+        missing,
     };
     let report = write_report(args, &suites, &variants, &problems, &records, &info)?;
     outln!("wrote {}", report.display());
@@ -667,6 +681,8 @@ struct RunInfo {
     wall: f64,
     computed: Computed,
     skipped: usize,
+    /// Planned runs not in `runs.jsonl` (only with `--report-only`).
+    missing: usize,
 }
 
 fn pm(values: &[f64], scale: f64, decimals: usize) -> String {
@@ -1154,6 +1170,14 @@ fn write_report(
             "n/a (nothing computed)".to_string()
         }
     );
+    if info.missing > 0 {
+        let _ = writeln!(
+            md,
+            "- **{} planned runs are not in `runs.jsonl`** (written with `--report-only`); \
+             the `runs` column of each table says how many runs a cell holds",
+            info.missing
+        );
+    }
     for (suite, (n, secs)) in &info.computed {
         let _ = writeln!(
             md,
@@ -1161,6 +1185,24 @@ fn write_report(
              (suites share one job queue)",
             suite.name(),
             secs / info.wall.max(1e-9)
+        );
+    }
+    // The report may gather runs of several invocations: their total run time per suite.
+    let _ = writeln!(md, "- All runs in this report (any invocation):");
+    for &suite in suites {
+        let secs: Vec<f64> = records
+            .values()
+            .filter(|r| r.suite == suite.name())
+            .map(|r| r.seconds)
+            .collect();
+        let total: f64 = secs.iter().sum();
+        let _ = writeln!(
+            md,
+            "  - {}: {} runs, {total:.0} s of run time (about {:.0} s of wall time at {} jobs)",
+            suite.name(),
+            secs.len(),
+            total / args.jobs as f64,
+            args.jobs
         );
     }
     md.push('\n');

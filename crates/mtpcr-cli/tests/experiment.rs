@@ -131,6 +131,30 @@ fn sensitivity_suites_write_their_variants_tables_and_figures() {
     ] {
         assert!(report.contains(needle), "{needle} missing from:\n{report}");
     }
+    // --report-only with more runs planned computes nothing and says what is missing.
+    let before = std::fs::read_to_string(out.join("runs.jsonl")).unwrap();
+    Command::new(env!("CARGO_BIN_EXE_mtpcr"))
+        .args(["experiment", "alpha", "--report-only", "--problems"])
+        .arg(&file)
+        .arg("--data-root")
+        .arg(dir.path())
+        .args(["--runs", "3", "--generations", "2", "--quiet", "--out"])
+        .arg(&out)
+        .assert()
+        .success();
+    assert_eq!(
+        std::fs::read_to_string(out.join("runs.jsonl")).unwrap(),
+        before
+    );
+    let partial = std::fs::read_to_string(out.join("RESULTS.md")).unwrap();
+    assert!(
+        partial.contains("12 planned runs are not in `runs.jsonl`"),
+        "{partial}"
+    );
+    assert!(
+        partial.contains("| synthetic | alpha 0.5 | 1 |"),
+        "{partial}"
+    );
     for png in [
         "alpha-convergence-synthetic.png",
         "sharing-convergence-synthetic.png",

@@ -497,6 +497,59 @@ impl PreparedProblem {
         translation(ct) * t * translation([-cs[0], -cs[1], -cs[2]])
     }
 
+    /// Refines given pairwise transforms T12, T23, T31 (original frames, e.g. an earlier
+    /// result or the user's own guess) by `config.refine_iterations` steps of the joint ICP
+    /// that `register` ends with. The result closes the loop exactly. The problem must have
+    /// been prepared with `refine_iterations > 0`.
+    pub fn refine(&self, transforms: &[Transform; 3], config: &Config) -> Result<[Transform; 3]> {
+        config.validate()?;
+        if config.refine_iterations == 0 {
+            return Err(Error::config(
+                "refine_iterations",
+                "must be at least 1 to refine",
+            ));
+        }
+        for (j, t) in transforms.iter().enumerate() {
+            if !t.iter().all(|v| v.is_finite()) {
+                return Err(Error::InvalidInput(format!(
+                    "T{} has a non-finite entry",
+                    ["12", "23", "31"][j]
+                )));
+            }
+        }
+        let pool = thread_pool(config.num_threads)?;
+        let centred: [Rigid; 3] = std::array::from_fn(|j| {
+            Rigid::from_matrix(&self.to_centred(j, (j + 1) % 3, &transforms[j]))
+        });
+        let refined = self.refine_centred(&centred, config.refine_iterations, &pool)?;
+        Ok(std::array::from_fn(|j| {
+            self.to_original(j, (j + 1) % 3, &refined[j].to_matrix())
+        }))
+    }
+
+    /// The joint ICP from the best spanning tree of `pairs` (centred frames); returns the
+    /// loop-closed pairwise transforms.
+    fn refine_centred(
+        &self,
+        pairs: &[Rigid; 3],
+        iterations: usize,
+        pool: &rayon::ThreadPool,
+    ) -> Result<[Rigid; 3]> {
+        let full = self.full.as_ref().ok_or_else(|| {
+            Error::config(
+                "refine_iterations",
+                "this problem was prepared without refinement; prepare it again",
+            )
+        })?;
+        let start = self.consistent_start(pairs);
+        let poses = refine::refine_loop(full, start, self.eps, iterations, pool);
+        // T_ij = W_j^-1 W_i with W_k mapping cloud k into cloud 1's (centred) frame.
+        Ok(std::array::from_fn(|i| {
+            let j = (i + 1) % 3;
+            Rigid::from_matrix(&(invert_rigid(&poses[j].to_matrix()) * poses[i].to_matrix()))
+        }))
+    }
+
     /// Runs the evolution. `config`'s preparation settings (sampling, search, aiding cap) must
     /// be those this problem was prepared with.
     pub fn register(
@@ -600,23 +653,12 @@ impl PreparedProblem {
             }
         }
         let out = best.expect("at least one restart runs");
-        let mut centred: [Rigid; 3] =
-            std::array::from_fn(|j| Rigid::from_individual(&out.best[3 + j]));
-        if config.refine_iterations > 0 {
-            let full = self.full.as_ref().ok_or_else(|| {
-                Error::config(
-                    "refine_iterations",
-                    "this problem was prepared without refinement; prepare it again",
-                )
-            })?;
-            let start = self.consistent_start(&centred);
-            let poses = refine::refine_loop(full, start, self.eps, config.refine_iterations, &pool);
-            // T_ij = W_j^-1 W_i with W_k mapping cloud k into cloud 1's (centred) frame.
-            centred = std::array::from_fn(|i| {
-                let j = (i + 1) % 3;
-                Rigid::from_matrix(&(invert_rigid(&poses[j].to_matrix()) * poses[i].to_matrix()))
-            });
-        }
+        let centred: [Rigid; 3] = std::array::from_fn(|j| Rigid::from_individual(&out.best[3 + j]));
+        let centred = if config.refine_iterations > 0 {
+            self.refine_centred(&centred, config.refine_iterations, &pool)?
+        } else {
+            centred
+        };
         let transforms: [Transform; 3] =
             std::array::from_fn(|j| self.to_original(j, (j + 1) % 3, &centred[j].to_matrix()));
         Ok(Registration {
