@@ -809,15 +809,19 @@ fn error_table(
             } else {
                 format!("{:.2}", median(&er) * 1000.0)
             };
+            let seconds = if secs.is_empty() {
+                "–".to_string()
+            } else {
+                format!("{:.1}", mean_std(&secs).0)
+            };
             let _ = writeln!(
                 md,
-                "| {name} | {} | {} | {ok}/{} | {} | {} | {med} |{paper} {:.1} |",
+                "| {name} | {} | {} | {ok}/{} | {} | {} | {med} |{paper} {seconds} |",
                 v.label,
                 rs.len(),
                 rs.len(),
                 pm(&er, 1000.0, 2),
                 pm(&et, 1000.0, 2),
-                mean_std(&secs).0
             );
         }
     }

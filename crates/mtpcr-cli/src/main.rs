@@ -96,7 +96,8 @@ enum Command {
         #[command(flatten)]
         run: RunArgs,
     },
-    /// Run the paper's experiment suites (accuracy, quality, noise) into a resumable folder.
+    /// Run the paper's experiment suites (accuracy, quality, noise, and the sensitivity
+    /// studies alpha, sharing, sampling) into a resumable folder.
     ///
     /// Every run is a line of DIR/runs.jsonl (runs already there are skipped); DIR/RESULTS.md
     /// and DIR/convergence-<problem>.png are regenerated from it.
