@@ -695,17 +695,27 @@ fn pm(values: &[f64], scale: f64, decimals: usize) -> String {
     }
 }
 
-/// The records of one (suite, variant, problem), by seed.
-fn cell<'a>(
-    records: &'a BTreeMap<Key, RunLine>,
+/// What one suite's part of the report is made from.
+struct Section<'a> {
     suite: Suite,
-    variant: &str,
-    problem: &str,
-) -> Vec<&'a RunLine> {
-    records
-        .values()
-        .filter(|r| r.suite == suite.name() && r.variant == variant && r.problem == problem)
-        .collect()
+    /// The output folder (figures are written there).
+    out: &'a Path,
+    variants: &'a [Variant],
+    /// The problems with at least one record of the suite.
+    problems: Vec<&'a LoadedProblem>,
+    records: &'a BTreeMap<Key, RunLine>,
+}
+
+impl Section<'_> {
+    /// The records of one (variant, problem), by seed.
+    fn cell(&self, variant: &str, problem: &str) -> Vec<&RunLine> {
+        self.records
+            .values()
+            .filter(|r| {
+                r.suite == self.suite.name() && r.variant == variant && r.problem == problem
+            })
+            .collect()
+    }
 }
 
 fn shell_quote(arg: &str) -> String {
@@ -776,14 +786,7 @@ fn problems_in<'a>(
 }
 
 /// Err_R / Err_T rows, problem-major: successes, mean ± std and median over the runs.
-fn error_table(
-    md: &mut String,
-    suite: Suite,
-    variants: &[Variant],
-    problems: &[&LoadedProblem],
-    records: &BTreeMap<Key, RunLine>,
-    paper: Option<PaperColumn<'_>>,
-) {
+fn error_table(md: &mut String, section: &Section<'_>, paper: Option<PaperColumn<'_>>) {
     let paper_col = paper.map_or(String::new(), |(h, _)| format!(" {h} |"));
     let _ = writeln!(
         md,
@@ -795,10 +798,10 @@ fn error_table(
         "|---|---|---:|---:|---:|---:|---:|{}---:|",
         if paper.is_some() { "---:|" } else { "" }
     );
-    for p in problems {
+    for p in &section.problems {
         let name = &p.problem.name;
-        for v in variants {
-            let rs = cell(records, suite, &v.key, name);
+        for v in section.variants {
+            let rs = section.cell(&v.key, name);
             let er: Vec<f64> = rs.iter().map(|r| r.err_r).collect();
             let et: Vec<f64> = rs.iter().map(|r| r.err_t).collect();
             let secs: Vec<f64> = rs.iter().map(|r| r.seconds).collect();
@@ -831,23 +834,15 @@ fn error_table(
 /// its Markdown link.
 fn convergence_figures(
     md: &mut String,
-    out: &Path,
+    section: &Section<'_>,
     (prefix, what): (&str, &str),
-    suite: Suite,
-    variants: &[Variant],
-    problems: &[&LoadedProblem],
-    records: &BTreeMap<Key, RunLine>,
 ) -> CliResult<()> {
-    for p in problems {
+    for p in &section.problems {
         let name = &p.problem.name;
-        let lines: Vec<(String, Vec<[f64; 6]>)> = variants
+        let lines: Vec<(String, Vec<[f64; 6]>)> = section
+            .variants
             .iter()
-            .map(|v| {
-                (
-                    v.label.clone(),
-                    mean_history(&cell(records, suite, &v.key, name)),
-                )
-            })
+            .map(|v| (v.label.clone(), mean_history(&section.cell(&v.key, name))))
             .filter(|(_, h)| !h.is_empty())
             .collect();
         if lines.is_empty() {
@@ -857,7 +852,7 @@ fn convergence_figures(
         plots::methods_convergence_png(
             &lines,
             &format!("{name}: best cost per generation, mean over runs, by {what}"),
-            &out.join(&file),
+            &section.out.join(&file),
         )?;
         let _ = writeln!(md, "![{name} convergence by {what}]({file})\n");
     }
@@ -876,14 +871,7 @@ fn mean_history(rs: &[&RunLine]) -> Vec<[f64; 6]> {
         .collect()
 }
 
-fn quality_section(
-    md: &mut String,
-    out: &Path,
-    variants: &[Variant],
-    problems: &[&LoadedProblem],
-    records: &BTreeMap<Key, RunLine>,
-) -> CliResult<()> {
-    let suite = Suite::Quality;
+fn quality_section(md: &mut String, section: &Section<'_>) -> CliResult<()> {
     let _ = writeln!(
         md,
         "Final best cost of each original task (1 − inlier fraction + loop term; lower is \
@@ -896,7 +884,7 @@ fn quality_section(
     );
     let mut header = "| problem | task | runs |".to_string();
     let mut rule = "|---|---|---:|".to_string();
-    for v in variants {
+    for v in section.variants {
         let _ = write!(header, " {} |", v.label);
         rule.push_str("---:|");
     }
@@ -905,12 +893,13 @@ fn quality_section(
         |value: f64, best: f64| best.is_finite() && value <= best + BEST_TOLERANCE * best.abs();
     let bold = |text: String, on: bool| if on { format!("**{text}**") } else { text };
     // Per method: bold B.Cost cells, bold Avg.Cost cells.
-    let mut wins = vec![(0usize, 0usize); variants.len()];
-    for p in problems {
+    let mut wins = vec![(0usize, 0usize); section.variants.len()];
+    for p in &section.problems {
         let name = &p.problem.name;
-        let cells: Vec<Vec<&RunLine>> = variants
+        let cells: Vec<Vec<&RunLine>> = section
+            .variants
             .iter()
-            .map(|v| cell(records, suite, &v.key, name))
+            .map(|v| section.cell(&v.key, name))
             .collect();
         for task in 0..3 {
             let costs: Vec<Vec<f64>> = cells
@@ -963,26 +952,11 @@ fn quality_section(
         "Convergence: mean over the runs of the best cost per generation of the six tasks \
          (generation 0 is the initial population); aiding tasks left, original right.\n"
     );
-    convergence_figures(
-        md,
-        out,
-        ("convergence-", "method"),
-        suite,
-        variants,
-        problems,
-        records,
-    )
+    convergence_figures(md, section, ("convergence-", "method"))
 }
 
 /// The alpha study: the error table beside the paper's, and convergence by alpha.
-fn alpha_section(
-    md: &mut String,
-    out: &Path,
-    variants: &[Variant],
-    problems: &[&LoadedProblem],
-    records: &BTreeMap<Key, RunLine>,
-) -> CliResult<()> {
-    let suite = Suite::Alpha;
+fn alpha_section(md: &mut String, section: &Section<'_>) -> CliResult<()> {
     let _ = writeln!(
         md,
         "`Config::paper()` with the loop-term weight alpha changed (paper: 0.05). The paper \
@@ -999,86 +973,53 @@ fn alpha_section(
                 format!("{:.2} / {:.2}", e[k].0, e[k].1)
             })
     };
-    error_table(
-        md,
-        suite,
-        variants,
-        problems,
-        records,
-        Some(("paper Err_R / Err_T ×1000", &paper)),
-    );
+    error_table(md, section, Some(("paper Err_R / Err_T ×1000", &paper)));
     md.push('\n');
-    convergence_figures(
-        md,
-        out,
-        ("alpha-convergence-", "alpha"),
-        suite,
-        variants,
-        problems,
-        records,
-    )
+    convergence_figures(md, section, ("alpha-convergence-", "alpha"))
 }
 
 /// The sharing-probability study: errors and convergence by p_intra = p_inter.
-fn sharing_section(
-    md: &mut String,
-    out: &Path,
-    variants: &[Variant],
-    problems: &[&LoadedProblem],
-    records: &BTreeMap<Key, RunLine>,
-) -> CliResult<()> {
-    let suite = Suite::Sharing;
+fn sharing_section(md: &mut String, section: &Section<'_>) -> CliResult<()> {
     let _ = writeln!(
         md,
         "`Config::paper()` with p_intra = p_inter = p (paper: 0.5; 0 is MTPCR-NKS). The paper \
          shows only the convergence curves (Bunny-c, 20 runs).\n"
     );
-    error_table(md, suite, variants, problems, records, None);
+    error_table(md, section, None);
     md.push('\n');
-    convergence_figures(
-        md,
-        out,
-        ("sharing-convergence-", "sharing probability"),
-        suite,
-        variants,
-        problems,
-        records,
-    )
+    convergence_figures(md, section, ("sharing-convergence-", "sharing probability"))
 }
 
 /// The sample-ratio study: errors by ratio, as a table and a chart (a line per problem).
-fn sampling_section(
-    md: &mut String,
-    out: &Path,
-    variants: &[Variant],
-    problems: &[&LoadedProblem],
-    records: &BTreeMap<Key, RunLine>,
-) -> CliResult<()> {
-    let suite = Suite::Sampling;
+fn sampling_section(md: &mut String, section: &Section<'_>) -> CliResult<()> {
     let _ = writeln!(
         md,
         "`Config::paper()` with the farthest-point sample ratio changed (paper: 0.05); eps \
          follows the sampled clouds. The paper shows Err_R and Err_T against the ratio as a \
          figure without numbers.\n"
     );
-    error_table(md, suite, variants, problems, records, None);
+    error_table(md, section, None);
     md.push('\n');
-    if problems.is_empty() {
+    if section.problems.is_empty() {
         return Ok(());
     }
-    let x_labels: Vec<String> = variants
+    let x_labels: Vec<String> = section
+        .variants
         .iter()
         .map(|v| format!("{}", v.config.sample_ratio))
         .collect();
     let by_problem = |measure: fn(&RunLine) -> f64, average: fn(&[f64]) -> f64| {
-        problems
+        section
+            .problems
             .iter()
             .map(|p| {
                 let name = &p.problem.name;
-                let values = variants
+                let values = section
+                    .variants
                     .iter()
                     .map(|v| {
-                        let xs: Vec<f64> = cell(records, suite, &v.key, name)
+                        let xs: Vec<f64> = section
+                            .cell(&v.key, name)
                             .iter()
                             .map(|r| measure(r) * 1000.0)
                             .collect();
@@ -1117,7 +1058,7 @@ fn sampling_section(
         &x_labels,
         &panels,
         "Registration errors by sample ratio (Config::paper() otherwise)",
-        &out.join(file),
+        &section.out.join(file),
     )?;
     let _ = writeln!(md, "![errors by sample ratio]({file})\n");
     Ok(())
@@ -1213,7 +1154,13 @@ fn write_report(
 
     for &suite in suites {
         let vs = &variants[&suite];
-        let ps = problems_in(records, suite, problems);
+        let section = Section {
+            suite,
+            out: &args.out,
+            variants: vs,
+            problems: problems_in(records, suite, problems),
+            records,
+        };
         match suite {
             Suite::Accuracy => {
                 let _ = writeln!(md, "## Accuracy (paper Table 2)\n");
@@ -1230,14 +1177,7 @@ fn write_report(
                         .find(|(n, _, _)| n.eq_ignore_ascii_case(name))
                         .map_or("–".to_string(), |(_, m, s)| format!("{m:.2} ± {s:.2}"))
                 };
-                error_table(
-                    &mut md,
-                    suite,
-                    vs,
-                    &ps,
-                    records,
-                    Some(("paper MTPCR Err_R ×1000", &paper)),
-                );
+                error_table(&mut md, &section, Some(("paper MTPCR Err_R ×1000", &paper)));
                 md.push('\n');
             }
             Suite::Noise => {
@@ -1248,30 +1188,30 @@ fn write_report(
                      coordinates (`PointCloud::with_normalized_noise`, seeded from the run \
                      seed) before the run; `Config::default()` and `Config::paper()`.\n"
                 );
-                error_table(&mut md, suite, vs, &ps, records, None);
+                error_table(&mut md, &section, None);
                 md.push('\n');
             }
             Suite::Quality => {
                 let _ = writeln!(md, "## Solution quality (paper Table 4)\n");
-                quality_section(&mut md, &args.out, vs, &ps, records)?;
+                quality_section(&mut md, &section)?;
             }
             Suite::Alpha => {
                 let _ = writeln!(md, "## Sensitivity to alpha (paper Section VI)\n");
-                alpha_section(&mut md, &args.out, vs, &ps, records)?;
+                alpha_section(&mut md, &section)?;
             }
             Suite::Sharing => {
                 let _ = writeln!(
                     md,
                     "## Sensitivity to the sharing probabilities (paper Section VI)\n"
                 );
-                sharing_section(&mut md, &args.out, vs, &ps, records)?;
+                sharing_section(&mut md, &section)?;
             }
             Suite::Sampling => {
                 let _ = writeln!(
                     md,
                     "## Sensitivity to the sample ratio (paper Section VI)\n"
                 );
-                sampling_section(&mut md, &args.out, vs, &ps, records)?;
+                sampling_section(&mut md, &section)?;
             }
         }
     }

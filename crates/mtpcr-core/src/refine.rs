@@ -82,33 +82,30 @@ fn median(mut v: Vec<f64>) -> f64 {
 
 /// The smallest neighbourhood of [`NEIGHBOURHOOD_LADDER`] that looks flat: the median over
 /// probe points of its surface variation (smallest covariance eigenvalue / sum) is at most
-/// [`FLAT_VARIATION`]. The probes' neighbourhoods are prefixes of one nearest-neighbour query.
+/// [`FLAT_VARIATION`]. Sizes are tried smallest first, so a clean scan costs one small query
+/// per probe.
 fn neighbourhood_size(tree: &ImmutableKdTree<f64, 3>, points: &[[f64; 3]]) -> usize {
-    let largest = NEIGHBOURHOOD_LADDER[NEIGHBOURHOOD_LADDER.len() - 1].min(points.len());
-    let k = std::num::NonZero::new(largest.max(1)).expect("k >= 1");
     let stride = points.len().div_ceil(NOISE_PROBES).max(1);
-    let variations: Vec<Vec<f64>> = points
-        .par_iter()
-        .step_by(stride)
-        .map(|p| {
-            let nn = tree
-                .query(p)
-                .nearest_n::<SquaredEuclidean<f64>>(k)
-                .execute();
-            NEIGHBOURHOOD_LADDER
-                .iter()
-                .map(|&m| {
-                    let nearest = nn[..m.min(nn.len())].iter();
-                    plane_fit(nearest.map(|r| &points[r.item as usize])).variation
-                })
-                .collect()
-        })
-        .collect();
-    NEIGHBOURHOOD_LADDER
-        .iter()
-        .enumerate()
-        .find(|&(i, _)| median(variations.iter().map(|v| v[i]).collect()) <= FLAT_VARIATION)
-        .map_or(largest, |(_, &m)| m.min(points.len()))
+    let probes: Vec<&[f64; 3]> = points.iter().step_by(stride).collect();
+    let mut size = 1;
+    for &m in &NEIGHBOURHOOD_LADDER {
+        size = m.min(points.len()).max(1);
+        let k = std::num::NonZero::new(size).expect("k >= 1");
+        let variations: Vec<f64> = probes
+            .par_iter()
+            .map(|p| {
+                let nn = tree
+                    .query(p)
+                    .nearest_n::<SquaredEuclidean<f64>>(k)
+                    .execute();
+                plane_fit(nn.iter().map(|r| &points[r.item as usize])).variation
+            })
+            .collect();
+        if median(variations) <= FLAT_VARIATION || size == points.len() {
+            break;
+        }
+    }
+    size
 }
 
 impl RefineCloud {
@@ -285,6 +282,22 @@ mod tests {
         [strip(-1.0, 0.3), strip(-0.3, 1.0), strip(-0.6, 0.6)]
     }
 
+    fn two_threads() -> rayon::ThreadPool {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(2)
+            .build()
+            .unwrap()
+    }
+
+    /// Poses 1-2 degrees and ~0.01 off the identity (the truth of [`strips`]).
+    fn misaligned_start() -> [Rigid; 3] {
+        [
+            Rigid::from_individual(&[0.0; 6]),
+            Rigid::from_individual(&[1.5, -1.0, 2.0, 0.01, -0.01, 0.005]),
+            Rigid::from_individual(&[-1.0, 0.5, -1.5, -0.01, 0.0, 0.01]),
+        ]
+    }
+
     #[test]
     fn plane_fits_grow_with_the_noise() {
         for (sigma, lo, hi) in [(0.0, 12, 12), (0.02, 96, 384)] {
@@ -301,15 +314,7 @@ mod tests {
         // (the earlier fixed size) the worst pose here is 0.44 deg off; sized from the noise,
         // 0.23 deg.
         let clouds = strips(7, 0.02).map(RefineCloud::new);
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(2)
-            .build()
-            .unwrap();
-        let start = [
-            Rigid::from_individual(&[0.0; 6]),
-            Rigid::from_individual(&[1.5, -1.0, 2.0, 0.01, -0.01, 0.005]),
-            Rigid::from_individual(&[-1.0, 0.5, -1.5, -0.01, 0.0, 0.01]),
-        ];
+        let (pool, start) = (two_threads(), misaligned_start());
         let est = refine_loop(&clouds, start, 0.04, 40, &pool);
         let ident = Rigid::from_individual(&[0.0; 6]).to_matrix();
         let worst = est
@@ -322,15 +327,7 @@ mod tests {
     #[test]
     fn joint_refinement_corrects_small_misalignments_and_closes_the_loop() {
         let clouds = strips(2, 0.0).map(RefineCloud::new);
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(2)
-            .build()
-            .unwrap();
-        let start = [
-            Rigid::from_individual(&[0.0; 6]),
-            Rigid::from_individual(&[1.5, -1.0, 2.0, 0.01, -0.01, 0.005]),
-            Rigid::from_individual(&[-1.0, 0.5, -1.5, -0.01, 0.0, 0.01]),
-        ];
+        let (pool, start) = (two_threads(), misaligned_start());
         let est = refine_loop(&clouds, start, 0.02, 40, &pool);
         let ident = Rigid::from_individual(&[0.0; 6]).to_matrix();
         for pose in &est {
