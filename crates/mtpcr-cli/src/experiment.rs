@@ -1102,7 +1102,8 @@ fn write_report(
         );
     }
     let n_computed: usize = info.computed.values().map(|c| c.0).sum();
-    let cpu: f64 = info.computed.values().map(|c| c.1).sum();
+    // fold from +0.0: an empty f64 sum is -0.0, printed "-0.0".
+    let cpu = info.computed.values().fold(0.0, |sum, c| sum + c.1);
     let _ = writeln!(
         md,
         "- This invocation: {n_computed} runs computed, {} reused from `runs.jsonl`, wall time \
