@@ -133,7 +133,7 @@ class Config:
         """Independent evolutions; the best is kept (beyond the paper). At least 1. Paper: 1."""
     @property
     def refine_iterations(self) -> int:
-        """Trimmed-ICP iterations refining each pair at full resolution; 0 = off. Paper: 0."""
+        """Joint trimmed-ICP iterations of the three clouds (closes the loop); 0 = off. Paper: 0."""
     @property
     def num_threads(self) -> int:
         """Worker threads; 0 = all cores. The result does not depend on it."""

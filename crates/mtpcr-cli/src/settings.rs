@@ -84,7 +84,7 @@ pub struct SettingsArgs {
     /// Independent evolutions; the one with the lowest original costs is kept (>= 1).
     #[arg(long, value_name = "N")]
     pub restarts: Option<usize>,
-    /// Trimmed-ICP iterations refining each pair after the evolution (0 = off).
+    /// Joint trimmed-ICP iterations of the three clouds after the evolution (0 = off).
     #[arg(long, value_name = "N")]
     pub refine_iterations: Option<usize>,
     /// Worker threads; 0 = all cores (the result does not depend on it).

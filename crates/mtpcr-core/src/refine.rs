@@ -1,7 +1,9 @@
 //! Optional final refinement (beyond the paper): a joint trimmed point-to-plane ICP of the
-//! three full-resolution clouds. It moves clouds 2 and 3 (cloud 1 stays) to fit all three
-//! overlaps at once, so the refined T12, T23, T31 close the loop exactly and a poorly
-//! overlapping pair is held by the two others instead of sliding on its own.
+//! three clouds (full resolution, reduced to at most 8000 plane-projected points each). It
+//! moves clouds 2 and 3 (cloud 1 stays) to fit all three overlaps at once, so the refined
+//! T12, T23, T31 close the loop exactly and a poorly overlapping pair is held by the two
+//! others instead of sliding on its own. The plane fits grow with the scan's noise, so noise
+//! is averaged out instead of biasing the fit.
 
 use crate::se3::Rigid;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};

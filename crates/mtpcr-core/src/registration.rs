@@ -76,8 +76,8 @@ pub struct Config {
     /// Independent evolutions (each with its own seed derived from `seed`); the one with the
     /// lowest sum of final original-task costs is kept (beyond the paper). At least 1. Paper: 1.
     pub restarts: usize,
-    /// Iterations of trimmed ICP refining each pair at full resolution after the evolution
-    /// (beyond the paper); 0 = off. Paper: 0.
+    /// Iterations of the joint trimmed point-to-plane ICP of the three clouds after the
+    /// evolution, which closes the loop exactly (beyond the paper); 0 = off. Paper: 0.
     pub refine_iterations: usize,
     /// Worker threads for the loss evaluations; 0 = all cores. The result does not depend on it.
     pub num_threads: usize,
