@@ -237,7 +237,8 @@ pub(crate) struct CategoryPanel {
 
 /// A sensitivity chart: one panel per measure, one line per series, x the categories
 /// `x_labels` evenly spaced, y logarithmic (errors of failed runs are orders of magnitude
-/// above the others). Values <= 0 or not finite are left out.
+/// above the others). Values <= 0 or not finite are left out. The legend sits lower left,
+/// where error curves (high at small ratios, falling to the right) leave room.
 pub(crate) fn categories_log_png(
     x_desc: &str,
     x_labels: &[String],
@@ -324,7 +325,7 @@ pub(crate) fn categories_log_png(
             }
             chart
                 .configure_series_labels()
-                .position(SeriesLabelPosition::UpperRight)
+                .position(SeriesLabelPosition::LowerLeft)
                 .background_style(WHITE.mix(0.9))
                 .border_style(RGBColor(160, 160, 160))
                 .label_font((FONT, 15))
