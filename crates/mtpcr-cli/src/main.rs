@@ -305,6 +305,7 @@ fn eval(
             run_json.push(serde_json::json!({
                 "seed": s, "success": scores.success, "err_r": scores.err_r, "err_t": scores.err_t,
                 "rot_deg": scores.rot_deg, "seconds": result.seconds,
+                "transforms": result.transforms.iter().map(mtpcr_core::io::matrix_rows).collect::<Vec<_>>(),
             }));
             all.push((scores, result.seconds));
         }
