@@ -9,12 +9,13 @@
 
 use crate::error::{outln, CliResult, Failure};
 use crate::{plots, progress};
-use clap::{Args, ValueEnum};
-use mtpcr_core::eval::{mean_std, run_moved};
-use mtpcr_core::io::Problem;
-use mtpcr_core::{Config, Method, PointCloud, Transform, TASK_NAMES};
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
+use clap::Args;
+use mtpcr_core::eval::problem::Problem;
+use mtpcr_core::eval::protocol::{
+    run_one, RunRecord, Suite, Variant, BUNNIES, PAPER_ALPHA, PAPER_ERR_R,
+};
+use mtpcr_core::eval::mean_std;
+use mtpcr_core::{PointCloud, Transform, ViewGraph};
 use std::collections::{BTreeMap, HashSet};
 use std::fmt::Write as _;
 use std::io::Write as _;
@@ -23,217 +24,12 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{mpsc, Mutex};
 use std::time::Instant;
 
-/// The paper's MTPCR Err_R x1000 (mean, std) on Bunny-a/b/c (Table 2).
-const PAPER_ERR_R: [(&str, f64, f64); 3] = [
-    ("bunny-a", 3.73, 0.64),
-    ("bunny-b", 4.76, 1.38),
-    ("bunny-c", 6.63, 1.65),
-];
-
-/// Noise levels of Table 3 (standard deviation in normalised coordinates).
-const NOISE_SIGMAS: [f64; 3] = [0.01, 0.02, 0.03];
-
-/// Loop-term weights of the alpha study, with the paper's Table (Err_R, Err_T x1000 on
-/// Bunny-a, Bunny-b, Bunny-c; 20 runs).
-const PAPER_ALPHA: [(f64, [(f64, f64); 3]); 6] = [
-    (0.5, [(141.06, 9.78), (1657.15, 99.23), (1622.86, 71.65)]),
-    (0.2, [(6.92, 0.27), (260.17, 15.14), (303.77, 16.59)]),
-    (0.1, [(7.22, 0.37), (105.88, 4.09), (508.85, 21.11)]),
-    (0.05, [(6.71, 0.29), (10.48, 0.67), (179.35, 9.39)]),
-    (0.02, [(8.19, 0.32), (11.18, 0.57), (188.29, 9.83)]),
-    (0.01, [(7.72, 0.32), (105.25, 5.63), (314.65, 7.81)]),
-];
-
-/// Sharing probabilities of the sharing study (p_intra = p_inter).
-const SHARING_PROBABILITIES: [f64; 7] = [0.0, 0.2, 0.4, 0.5, 0.6, 0.8, 1.0];
-
-/// Sample ratios of the sample-ratio study.
-const SAMPLE_RATIOS: [f64; 10] = [0.01, 0.02, 0.03, 0.04, 0.05, 0.1, 0.2, 0.3, 0.4, 0.5];
-
-/// The paper's Bunny problems (the alpha and sample-ratio studies use them).
-const BUNNIES: [&str; 3] = ["bunny-a", "bunny-b", "bunny-c"];
-
 /// A "No. of Best" cell counts when the method's mean is within this fraction of the best.
 const BEST_TOLERANCE: f64 = 0.01;
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, ValueEnum)]
-pub enum Suite {
-    /// Table 2: Err_R / Err_T of MTPCR with Config::default() and Config::paper().
-    Accuracy,
-    /// Table 4: final original-task costs of MTPCR, MFEA, G-MFEA and the ablations, with
-    /// convergence figures.
-    Quality,
-    /// Table 3: Err_R / Err_T under Gaussian noise (sigma 0.01, 0.02, 0.03), default and
-    /// paper settings.
-    Noise,
-    /// Sensitivity to alpha (loop-term weight), paper settings, on Bunny-a/b/c.
-    Alpha,
-    /// Sensitivity to the sharing probabilities (p_intra = p_inter), paper settings, on
-    /// Bunny-c.
-    Sharing,
-    /// Sensitivity to the sample ratio, paper settings, on Bunny-a/b/c.
-    Sampling,
-}
-
-impl Suite {
-    fn name(self) -> &'static str {
-        match self {
-            Suite::Accuracy => "accuracy",
-            Suite::Quality => "quality",
-            Suite::Noise => "noise",
-            Suite::Alpha => "alpha",
-            Suite::Sharing => "sharing",
-            Suite::Sampling => "sampling",
-        }
-    }
-
-    /// Runs per problem and variant, as in the paper.
-    fn default_runs(self) -> usize {
-        match self {
-            Suite::Quality | Suite::Alpha | Suite::Sharing => 20,
-            Suite::Accuracy | Suite::Noise | Suite::Sampling => 10,
-        }
-    }
-
-    /// The problems the paper ran the suite on (used unless `--problems` is given); `None`:
-    /// every problem.
-    fn paper_problems(self) -> Option<&'static [&'static str]> {
-        match self {
-            Suite::Alpha | Suite::Sampling => Some(&BUNNIES),
-            Suite::Sharing => Some(&BUNNIES[2..]),
-            Suite::Accuracy | Suite::Quality | Suite::Noise => None,
-        }
-    }
-
-    /// The variants of the suite: key, label for the tables, settings, noise sigma.
-    fn variants(self) -> Vec<Variant> {
-        let paper = Config::paper;
-        let with = |key: &str, label: &str, config: Config| Variant {
-            key: key.to_string(),
-            label: label.to_string(),
-            config,
-            noise: None,
-        };
-        match self {
-            Suite::Accuracy => vec![
-                with("mtpcr-default", "MTPCR (default)", Config::default()),
-                with("mtpcr-paper", "MTPCR (paper)", paper()),
-            ],
-            Suite::Quality => vec![
-                with("mtpcr", "MTPCR", paper()),
-                with(
-                    "mfea",
-                    "MFEA",
-                    Config {
-                        method: Method::Mfea,
-                        ..paper()
-                    },
-                ),
-                with(
-                    "gmfea",
-                    "G-MFEA",
-                    Config {
-                        method: Method::Gmfea,
-                        ..paper()
-                    },
-                ),
-                with(
-                    "mtpcr-intra",
-                    "MTPCR-Intra",
-                    Config {
-                        p_inter: 0.0,
-                        ..paper()
-                    },
-                ),
-                with(
-                    "mtpcr-inter",
-                    "MTPCR-Inter",
-                    Config {
-                        p_intra: 0.0,
-                        ..paper()
-                    },
-                ),
-                with(
-                    "mtpcr-nks",
-                    "MTPCR-NKS",
-                    Config {
-                        p_intra: 0.0,
-                        p_inter: 0.0,
-                        ..paper()
-                    },
-                ),
-            ],
-            Suite::Noise => {
-                let noisy = |key: String, label: String, config: Config, sigma: f64| Variant {
-                    key,
-                    label,
-                    config,
-                    noise: Some(sigma),
-                };
-                let default = NOISE_SIGMAS.iter().map(|&s| {
-                    noisy(
-                        format!("noise-{s:.2}"),
-                        format!("default, sigma {s:.2}"),
-                        Config::default(),
-                        s,
-                    )
-                });
-                let paper_noise = NOISE_SIGMAS.iter().map(|&s| {
-                    noisy(
-                        format!("noise-paper-{s:.2}"),
-                        format!("paper, sigma {s:.2}"),
-                        paper(),
-                        s,
-                    )
-                });
-                default.chain(paper_noise).collect()
-            }
-            Suite::Alpha => PAPER_ALPHA
-                .iter()
-                .map(|&(alpha, _)| {
-                    with(
-                        &format!("alpha-{alpha}"),
-                        &format!("alpha {alpha}"),
-                        Config { alpha, ..paper() },
-                    )
-                })
-                .collect(),
-            Suite::Sharing => SHARING_PROBABILITIES
-                .iter()
-                .map(|&p| {
-                    with(
-                        &format!("sharing-{p:.1}"),
-                        &format!("p {p:.1}"),
-                        Config {
-                            p_intra: p,
-                            p_inter: p,
-                            ..paper()
-                        },
-                    )
-                })
-                .collect(),
-            Suite::Sampling => SAMPLE_RATIOS
-                .iter()
-                .map(|&r| {
-                    with(
-                        &format!("ratio-{r}"),
-                        &format!("ratio {r}"),
-                        Config {
-                            sample_ratio: r,
-                            ..paper()
-                        },
-                    )
-                })
-                .collect(),
-        }
-    }
-}
-
-struct Variant {
-    key: String,
-    label: String,
-    config: Config,
-    noise: Option<f64>,
+/// Parses a suite name for clap.
+fn parse_suite(name: &str) -> Result<Suite, String> {
+    Suite::from_name(name).map_err(|e| e.to_string())
 }
 
 /// Arguments of `mtpcr experiment`.
@@ -241,7 +37,7 @@ struct Variant {
 pub struct ExperimentArgs {
     /// Suites to run: accuracy (Table 2), quality (Table 4), noise (Table 3), and the
     /// sensitivity studies alpha, sharing, sampling.
-    #[arg(required = true, value_enum, value_name = "SUITE")]
+    #[arg(required = true, value_name = "SUITE", value_parser = parse_suite)]
     pub suites: Vec<Suite>,
     /// Output folder: runs.jsonl (one line per run, resumable), RESULTS.md, figures.
     #[arg(long, value_name = "DIR")]
@@ -272,41 +68,13 @@ pub struct ExperimentArgs {
     pub report_only: bool,
 }
 
-/// Final best costs of a run.
-#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
-struct FinalCosts {
-    original: [f64; 3],
-    aiding: [f64; 3],
-}
-
-/// One line of `runs.jsonl`.
-#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
-struct RunLine {
-    suite: String,
-    variant: String,
-    problem: String,
-    seed: u64,
-    settings: Config,
-    success: bool,
-    err_r: f64,
-    err_t: f64,
-    rot_deg: [f64; 3],
-    final_costs: FinalCosts,
-    history: Vec<[f64; 6]>,
-    seconds: f64,
-}
+type RunLine = RunRecord;
 
 type Key = (String, String, String, u64);
 
-impl RunLine {
-    fn key(&self) -> Key {
-        (
-            self.suite.clone(),
-            self.variant.clone(),
-            self.problem.clone(),
-            self.seed,
-        )
-    }
+/// The record's key: (suite, variant, problem, seed).
+fn key(r: &RunLine) -> Key {
+    (r.suite.clone(), r.variant.clone(), r.problem.clone(), r.seed)
 }
 
 /// One planned run.
@@ -320,8 +88,8 @@ struct Work {
 struct LoadedProblem {
     problem: Problem,
     /// Read on first use by a pending run.
-    scans: Option<[PointCloud; 3]>,
-    truth: [Transform; 3],
+    scans: Option<Vec<PointCloud>>,
+    truth: Vec<Transform>,
 }
 
 fn default_problems() -> CliResult<Vec<PathBuf>> {
@@ -381,7 +149,7 @@ fn read_runs(path: &Path) -> CliResult<Vec<RunLine>> {
     Ok(runs)
 }
 
-/// One run: optional noise (seeded from the run seed), a seeded random motion, registration.
+/// One run of the protocol (`mtpcr_core::eval::protocol::run_one`).
 fn execute(
     variant: &Variant,
     problem: &LoadedProblem,
@@ -393,49 +161,16 @@ fn execute(
         .scans
         .as_ref()
         .ok_or_else(|| format!("{}: scans not loaded", problem.problem.name))?;
-    let mut config = Config {
-        num_threads: 1,
-        seed: Some(seed),
-        ..variant.config.clone()
-    };
-    if let Some(g) = generations {
-        config.generations = g;
-    }
-    let noisy;
-    let clouds = match variant.noise {
-        Some(sigma) => {
-            let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x6e_6f69_7365);
-            let mut out = Vec::with_capacity(3);
-            for c in scans {
-                out.push(
-                    c.with_normalized_noise(sigma, &mut rng)
-                        .map_err(|e| e.to_string())?,
-                );
-            }
-            noisy = <[PointCloud; 3]>::try_from(out).map_err(|_| "three clouds".to_string())?;
-            &noisy
-        }
-        None => scans,
-    };
-    let (result, scores) =
-        run_moved(clouds, &problem.truth, &config, seed).map_err(|e| e.to_string())?;
-    Ok(RunLine {
-        suite: suite.name().to_string(),
-        variant: variant.key.clone(),
-        problem: problem.problem.name.clone(),
+    run_one(
+        suite,
+        variant,
+        &problem.problem.name,
+        scans,
+        &problem.truth,
         seed,
-        settings: config,
-        success: scores.success,
-        err_r: scores.err_r,
-        err_t: scores.err_t,
-        rot_deg: scores.rot_deg,
-        final_costs: FinalCosts {
-            original: result.best_costs.original,
-            aiding: result.best_costs.aiding,
-        },
-        history: result.history,
-        seconds: result.seconds,
-    })
+        generations,
+    )
+    .map_err(|e| e.to_string())
 }
 
 /// Runs `mtpcr experiment`.
@@ -458,7 +193,7 @@ pub fn run(args: &ExperimentArgs) -> CliResult<()> {
     let mut problems: Vec<LoadedProblem> = Vec::new();
     for f in &files {
         let problem = Problem::load(f, args.data_root.as_deref())?;
-        let truth = problem.ground_truth();
+        let truth = problem.ground_truth()?;
         problems.push(LoadedProblem {
             problem,
             scans: None,
@@ -481,7 +216,7 @@ pub fn run(args: &ExperimentArgs) -> CliResult<()> {
     std::fs::create_dir_all(&args.out)
         .map_err(|e| Failure(format!("{}: {e}", args.out.display())))?;
     let runs_path = args.out.join("runs.jsonl");
-    let done: HashSet<Key> = read_runs(&runs_path)?.iter().map(RunLine::key).collect();
+    let done: HashSet<Key> = read_runs(&runs_path)?.iter().map(key).collect();
 
     // The plan of this invocation: every (suite, variant, problem, seed); pending = not done.
     let mut plan: HashSet<Key> = HashSet::new();
@@ -544,7 +279,7 @@ pub fn run(args: &ExperimentArgs) -> CliResult<()> {
             for (c, path) in scans.iter().zip(&p.problem.scans) {
                 c.validate(
                     &path.display().to_string(),
-                    mtpcr_core::registration::MIN_POINTS,
+                    mtpcr_core::MIN_POINTS,
                 )?;
             }
             p.scans = Some(scans);
@@ -557,7 +292,7 @@ pub fn run(args: &ExperimentArgs) -> CliResult<()> {
     let all = read_runs(&runs_path)?;
     let mut records: BTreeMap<Key, RunLine> = BTreeMap::new();
     for r in all {
-        let k = r.key();
+        let k = key(&r);
         if plan.contains(&k) {
             records.insert(k, r);
         }
@@ -652,18 +387,14 @@ fn execute_all(
             if !args.quiet {
                 bar.suspend(|| {
                     eprintln!(
-                        "[{finished}/{total}] {} {vkey} {name} seed {}: {} rot {:.2} {:.2} {:.2} \
-                         deg, Err_R x1000 {:.2}, J-o {:.4} {:.4} {:.4}, {:.1} s",
+                        "[{finished}/{total}] {} {vkey} {name} seed {}: {} rot {} deg, \
+                         Err_R x1000 {:.2}, J-o {}, {:.1} s",
                         w.suite.name(),
                         w.seed,
                         if line.success { "ok  " } else { "FAIL" },
-                        line.rot_deg[0],
-                        line.rot_deg[1],
-                        line.rot_deg[2],
+                        joined(&line.rot_deg, 2),
                         line.err_r * 1000.0,
-                        line.final_costs.original[0],
-                        line.final_costs.original[1],
-                        line.final_costs.original[2],
+                        joined(&line.final_costs.original, 4),
                         line.seconds
                     )
                 });
@@ -716,6 +447,12 @@ impl Section<'_> {
             })
             .collect()
     }
+}
+
+/// Values joined by spaces with `decimals` decimals.
+fn joined(values: &[f64], decimals: usize) -> String {
+    let parts: Vec<String> = values.iter().map(|v| format!("{v:.decimals$}")).collect();
+    parts.join(" ")
 }
 
 fn shell_quote(arg: &str) -> String {
@@ -839,7 +576,7 @@ fn convergence_figures(
 ) -> CliResult<()> {
     for p in &section.problems {
         let name = &p.problem.name;
-        let lines: Vec<(String, Vec<[f64; 6]>)> = section
+        let lines: Vec<(String, Vec<Vec<f64>>)> = section
             .variants
             .iter()
             .map(|v| (v.label.clone(), mean_history(&section.cell(&v.key, name))))
@@ -849,8 +586,10 @@ fn convergence_figures(
             continue;
         }
         let file = format!("{prefix}{name}.png");
+        let names = ViewGraph::for_views(p.problem.scans.len())?.task_names();
         plots::methods_convergence_png(
             &lines,
+            &names,
             &format!("{name}: best cost per generation, mean over runs, by {what}"),
             &section.out.join(&file),
         )?;
@@ -860,13 +599,14 @@ fn convergence_figures(
 }
 
 /// Mean over runs of the history rows (cut to the shortest history).
-fn mean_history(rs: &[&RunLine]) -> Vec<[f64; 6]> {
+fn mean_history(rs: &[&RunLine]) -> Vec<Vec<f64>> {
     let len = rs.iter().map(|r| r.history.len()).min().unwrap_or(0);
+    let tasks = rs.first().map_or(0, |r| r.history.first().map_or(0, Vec::len));
     (0..len)
         .map(|g| {
-            std::array::from_fn(|t| {
-                rs.iter().map(|r| r.history[g][t]).sum::<f64>() / rs.len() as f64
-            })
+            (0..tasks)
+                .map(|t| rs.iter().map(|r| r.history[g][t]).sum::<f64>() / rs.len() as f64)
+                .collect()
         })
         .collect()
 }
@@ -901,7 +641,9 @@ fn quality_section(md: &mut String, section: &Section<'_>) -> CliResult<()> {
             .iter()
             .map(|v| section.cell(&v.key, name))
             .collect();
-        for task in 0..3 {
+        let names = ViewGraph::for_views(p.problem.scans.len())?.task_names();
+        let edges = names.len() / 2;
+        for task in 0..edges {
             let costs: Vec<Vec<f64>> = cells
                 .iter()
                 .map(|rs| rs.iter().map(|r| r.final_costs.original[task]).collect())
@@ -919,7 +661,7 @@ fn quality_section(md: &mut String, section: &Section<'_>) -> CliResult<()> {
             };
             let (best_lowest, best_mean) = (best_of(&lowest), best_of(&means));
             let runs = cells.iter().map(Vec::len).max().unwrap_or(0);
-            let mut row = format!("| {name} | {} | {runs} |", TASK_NAMES[3 + task]);
+            let mut row = format!("| {name} | {} | {runs} |", names[edges + task]);
             for (m, c) in costs.iter().enumerate() {
                 if c.is_empty() {
                     row.push_str(" – |");
@@ -1073,7 +815,18 @@ fn write_report(
     info: &RunInfo,
 ) -> CliResult<PathBuf> {
     let mut md = String::new();
-    let command: Vec<String> = std::env::args().map(|a| shell_quote(&a)).collect();
+    // The command as typed, without machine paths: the program is `mtpcr`, absolute
+    // paths below the working directory are written relative to it.
+    let cwd = std::env::current_dir().unwrap_or_default();
+    let command: Vec<String> = std::iter::once("mtpcr".to_string())
+        .chain(std::env::args().skip(1).map(|a| {
+            let rel = Path::new(&a)
+                .strip_prefix(&cwd)
+                .map(|r| r.display().to_string())
+                .unwrap_or(a);
+            shell_quote(&rel)
+        }))
+        .collect();
     let _ = writeln!(md, "# MTPCR experiments\n");
     let _ = writeln!(
         md,
@@ -1081,13 +834,6 @@ fn write_report(
          the command skips the runs already there).\n"
     );
     let _ = writeln!(md, "- Command: `{}`", command.join(" "));
-    let _ = writeln!(
-        md,
-        "- Working directory: `{}`",
-        std::env::current_dir()
-            .map(|d| d.display().to_string())
-            .unwrap_or_default()
-    );
     let _ = writeln!(md, "- Machine: {}", machine());
     let _ = writeln!(
         md,
@@ -1235,45 +981,25 @@ mod tests {
             variant: "mfea".into(),
             problem: "p".into(),
             seed: 3,
-            settings: Config::paper(),
+            settings: mtpcr_core::Config::paper(),
             success: true,
             err_r: 0.1,
             err_t: 0.2,
-            rot_deg: [1.0, 2.0, 3.0],
-            final_costs: FinalCosts {
-                original: [0.5; 3],
-                aiding: [0.01; 3],
+            rot_deg: vec![1.0, 2.0, 3.0],
+            final_costs: mtpcr_core::eval::protocol::FinalCosts {
+                original: vec![0.5; 3],
+                aiding: vec![0.01; 3],
             },
-            history: vec![[1.0; 6], [0.5; 6]],
+            history: vec![vec![1.0; 6], vec![0.5; 6]],
             seconds: 1.5,
         };
         let text = serde_json::to_string(&line).unwrap();
         std::fs::write(&path, format!("{text}\n{}", &text[..20])).unwrap();
         let runs = read_runs(&path).unwrap();
         assert_eq!(runs.len(), 1);
-        assert_eq!(runs[0].key(), line.key());
+        assert_eq!(key(&runs[0]), key(&line));
         assert_eq!(std::fs::read_to_string(&path).unwrap(), format!("{text}\n"));
         std::fs::remove_dir_all(&dir).unwrap();
-    }
-
-    #[test]
-    fn variants_have_distinct_keys_and_valid_settings() {
-        for s in Suite::value_variants() {
-            let s = *s;
-            let vs = s.variants();
-            let keys: HashSet<&str> = vs.iter().map(|v| v.key.as_str()).collect();
-            assert_eq!(keys.len(), vs.len());
-            for v in &vs {
-                v.config.validate().unwrap();
-            }
-        }
-        assert_eq!(Suite::Quality.variants().len(), 6);
-        assert_eq!(Suite::Noise.variants()[1].key, "noise-0.02");
-        assert_eq!(Suite::Noise.variants()[4].key, "noise-paper-0.02");
-        assert_eq!(Suite::Alpha.variants()[3].config.alpha, 0.05);
-        assert_eq!(Suite::Sampling.variants()[9].config.sample_ratio, 0.5);
-        let sharing = &Suite::Sharing.variants()[2].config;
-        assert_eq!((sharing.p_intra, sharing.p_inter), (0.4, 0.4));
     }
 
     #[test]

@@ -10,12 +10,12 @@ mod plots;
 mod progress;
 mod settings;
 
-use clap::{CommandFactory, Parser, Subcommand};
+use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 use error::{outln, CliResult, Failure};
+use mtpcr_core::eval::problem::Problem;
 use mtpcr_core::eval::{mean_std, run_moved, score};
-use mtpcr_core::io::{read_ply, Problem};
-use mtpcr_core::registration::MIN_POINTS;
-use mtpcr_core::{synthetic, Config, PointCloud, TASK_NAMES};
+use mtpcr_core::io::read_ply;
+use mtpcr_core::{synthetic, Config, PointCloud, MIN_POINTS};
 use settings::RunArgs;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -24,8 +24,9 @@ use std::process::ExitCode;
 #[command(
     name = "mtpcr",
     version,
-    about = "Register three overlapping point clouds with no initial guess (MTPCR)",
-    long_about = "Register three overlapping point clouds with no initial guess (MTPCR).\n\n\
+    about = "Register overlapping point clouds with no initial guess (MTPCR)",
+    long_about = "Register overlapping point clouds (two, or three or more in loop order) with no \
+        initial guess (MTPCR).\n\n\
         Convention: T_ij maps points of cloud i into the frame of cloud j (x_j = T_ij x_i).\n\
         Settings come from Config::default() (or --paper), then --config FILE, then the flags.",
     after_help = "Examples:\n  \
@@ -55,14 +56,15 @@ enum Command {
         #[command(flatten)]
         run: RunArgs,
     },
-    /// Register three PLY files and write a results folder.
+    /// Register PLY files (two, or three or more in loop order) and write a results folder.
     ///
-    /// The folder holds result.json, config.toml (the settings, to repeat the run),
-    /// transforms.txt, merged.ply (the clouds in cloud 1's frame, one colour per view),
-    /// convergence.png and views.png.
+    /// Two clouds give T12; three or more, given in loop order (cloud k overlaps cloud k+1,
+    /// the last closes the loop with the first), give T12, T23, ..., Tn1. The folder holds
+    /// result.json, config.toml (the settings, to repeat the run), transforms.txt, merged.ply
+    /// (the clouds in cloud 1's frame, one colour per view), convergence.png and views.png.
     Register {
-        /// The three clouds, in loop order (T12, T23, T31).
-        #[arg(num_args = 3, required = true, action = clap::ArgAction::Set, value_names = ["CLOUD1.ply", "CLOUD2.ply", "CLOUD3.ply"])]
+        /// The clouds, in loop order.
+        #[arg(num_args = 2.., required = true, value_name = "CLOUD.ply")]
         clouds: Vec<PathBuf>,
         /// Output folder [default: results/<UTC timestamp>]; must be new or empty unless --force.
         #[arg(long, short, value_name = "DIR")]
@@ -125,10 +127,11 @@ fn demo(seed: Option<u64>, points: usize, run: &RunArgs) -> CliResult<bool> {
          (seed {seed})"
     );
     let result = progress::register_with_bar(&problem.clouds, &config, run.quiet, "demo")?;
-    let s = score(&result.transforms, &problem.ground_truth);
+    let transforms = result.transforms();
+    let s = score(&transforms, &problem.ground_truth);
     let names = ["T12", "T23", "T31"];
     for (i, name) in names.iter().enumerate() {
-        let t = mtpcr_core::se3::translation_error(&result.transforms[i], &problem.ground_truth[i]);
+        let t = mtpcr_core::se3::translation_error(&transforms[i], &problem.ground_truth[i]);
         outln!(
             "  {name}: rotation error {:.3} deg, translation error {t:.2e} (shape size 0.15)",
             s.rot_deg[i]
@@ -136,7 +139,7 @@ fn demo(seed: Option<u64>, points: usize, run: &RunArgs) -> CliResult<bool> {
     }
     outln!(
         "  loop residual {:.2e}, {} evaluations, {:.2} s",
-        result.loop_residual(),
+        result.loop_residual().unwrap_or(f64::NAN),
         result.evaluations,
         result.seconds
     );
@@ -163,8 +166,8 @@ fn draw_seed() -> u64 {
         & 0xffff_ffff
 }
 
-fn read_clouds(paths: &[PathBuf], quiet: bool) -> CliResult<[PointCloud; 3]> {
-    let mut clouds = Vec::with_capacity(3);
+fn read_clouds(paths: &[PathBuf], quiet: bool) -> CliResult<Vec<PointCloud>> {
+    let mut clouds = Vec::with_capacity(paths.len());
     for p in paths {
         let c = read_ply(p)?;
         c.validate(&p.display().to_string(), MIN_POINTS)?;
@@ -173,9 +176,7 @@ fn read_clouds(paths: &[PathBuf], quiet: bool) -> CliResult<[PointCloud; 3]> {
         }
         clouds.push(c);
     }
-    clouds
-        .try_into()
-        .map_err(|_| Failure("three clouds are needed".to_string()))
+    Ok(clouds)
 }
 
 fn register_files(
@@ -187,8 +188,15 @@ fn register_files(
 ) -> CliResult<()> {
     let mut config = settings::resolve(run, seed)?;
     config.seed = Some(config.seed.unwrap_or_else(draw_seed));
-    let clouds = read_clouds(inputs, run.quiet)?;
+    // The folder is checked before the (possibly long) reading.
     let dir = output::prepare_output(output, inputs, force)?;
+    let clouds = match read_clouds(inputs, run.quiet) {
+        Ok(c) => c,
+        Err(e) => {
+            dir.discard_if_unused();
+            return Err(e);
+        }
+    };
     let result = match progress::register_with_bar(&clouds, &config, run.quiet, "register") {
         Ok(r) => r,
         Err(e) => {
@@ -199,7 +207,7 @@ fn register_files(
     if !run.quiet {
         eprintln!("writing {}", dir.path.display());
     }
-    let help = settings::field_help(&Cli::command());
+    let help = settings::field_help();
     let record = output::RunRecord {
         inputs,
         clouds: &clouds,
@@ -209,33 +217,37 @@ fn register_files(
     };
     output::write_results(&dir.path, &record)?;
 
-    let pairs = ["T12", "T23", "T31"];
-    for (k, name) in pairs.iter().enumerate() {
-        let (i, j) = (k + 1, (k + 1) % 3 + 1);
+    let edges = result.edges.len();
+    for (k, e) in result.edges.iter().enumerate() {
         outln!(
-            "{name} (cloud {i} -> cloud {j} frame) =\n{}",
-            mtpcr_core::io::matrix_text(&result.transforms[k])
+            "{} (cloud {} -> cloud {} frame) =\n{}",
+            result.edge_name(k),
+            e.source + 1,
+            e.target + 1,
+            mtpcr_core::io::matrix_text(&e.t_target_source)
         );
     }
     outln!(
-        "{:<5} {:>14} {:>12}",
+        "{:<6} {:>14} {:>12}   (the evolution's best costs, before refinement)",
         "pair",
         "best original",
         "best aiding"
     );
-    for (k, name) in pairs.iter().enumerate() {
+    for (k, e) in result.edges.iter().enumerate() {
         outln!(
-            "{:<5} {:>14.6} {:>12.6}   ({} / {})",
-            name,
-            result.best_costs.original[k],
-            result.best_costs.aiding[k],
-            TASK_NAMES[3 + k],
-            TASK_NAMES[k]
+            "{:<6} {:>14.6} {:>12.6}   ({} / {})",
+            result.edge_name(k),
+            e.original_cost,
+            e.aiding_cost,
+            result.task_names[edges + k],
+            result.task_names[k]
         );
     }
+    let residual = result
+        .loop_residual()
+        .map_or("none (no loop)".to_string(), |r| format!("{r:.3e}"));
     outln!(
-        "loop residual {:.3e}, {} evaluations, {:.2} s, seed {}",
-        result.loop_residual(),
+        "loop residual {residual}, {} evaluations, {:.2} s, seed {}",
         result.evaluations,
         result.seconds,
         result.seed
@@ -272,7 +284,7 @@ fn eval(
     for problem in &loaded {
         bar.set_message(format!("{}: reading the scans", problem.name));
         let clouds = problem.read_scans()?;
-        let truth = problem.ground_truth();
+        let truth = problem.ground_truth()?;
         let mut run_json = Vec::new();
         let mut all = Vec::new();
         for r in 0..runs {
@@ -287,16 +299,16 @@ fn eval(
             bar.inc(1);
             if !run.quiet {
                 bar.suspend(|| {
+                    let rot: Vec<String> =
+                        scores.rot_deg.iter().map(|d| format!("{d:.2}")).collect();
                     eprintln!(
-                        "{} run {}/{} seed {}: {} rot {:.2} {:.2} {:.2} deg, Err_R x1000 {:.2}, {:.2} s",
+                        "{} run {}/{} seed {}: {} rot {} deg, Err_R x1000 {:.2}, {:.2} s",
                         problem.name,
                         r + 1,
                         runs,
                         s,
                         if scores.success { "ok  " } else { "FAIL" },
-                        scores.rot_deg[0],
-                        scores.rot_deg[1],
-                        scores.rot_deg[2],
+                        rot.join(" "),
                         scores.err_r * 1000.0,
                         result.seconds
                     )
@@ -305,7 +317,7 @@ fn eval(
             run_json.push(serde_json::json!({
                 "seed": s, "success": scores.success, "err_r": scores.err_r, "err_t": scores.err_t,
                 "rot_deg": scores.rot_deg, "seconds": result.seconds,
-                "transforms": result.transforms.iter().map(mtpcr_core::io::matrix_rows).collect::<Vec<_>>(),
+                "transforms": result.transforms().iter().map(mtpcr_core::io::matrix_rows).collect::<Vec<_>>(),
             }));
             all.push((scores, result.seconds));
         }
@@ -328,7 +340,7 @@ fn eval(
         let et: Vec<f64> = all.iter().map(|(s, _)| s.err_t * 1000.0).collect();
         let deg: Vec<f64> = all
             .iter()
-            .map(|(s, _)| s.rot_deg.iter().sum::<f64>() / 3.0)
+            .map(|(s, _)| s.rot_deg.iter().sum::<f64>() / s.rot_deg.len() as f64)
             .collect();
         let secs: Vec<f64> = all.iter().map(|(_, t)| *t).collect();
         let ok = all.iter().filter(|(s, _)| s.success).count();
@@ -366,13 +378,15 @@ fn dump_config(paper: bool) -> CliResult<()> {
     } else {
         (Config::default(), "mtpcr settings: Config::default()")
     };
-    let text = settings::config_toml(&config, &settings::field_help(&Cli::command()), title)?;
+    let text = settings::config_toml(&config, &settings::field_help(), title)?;
     outln!("{}", text.trim_end());
     Ok(())
 }
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    // The settings flags' help comes from the core's field documentation.
+    let matches = settings::document(Cli::command()).get_matches();
+    let cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
     let outcome = match &cli.command {
         Command::Demo { seed, points, run } => demo(*seed, *points, run).map(|ok| {
             if ok {

@@ -3,7 +3,7 @@
 use crate::error::{CliResult, Failure};
 use crate::plots;
 use mtpcr_core::io::{matrix_rows, matrix_text, write_ply};
-use mtpcr_core::{Config, PointCloud, Registration, TASK_NAMES};
+use mtpcr_core::{Config, PointCloud, Registration};
 use std::path::{Path, PathBuf};
 
 /// The files a run writes, in the order they are written.
@@ -19,9 +19,6 @@ pub const OUTPUT_FILES: [&str; 6] = [
 /// The direction convention, in one sentence.
 pub const CONVENTION: &str =
     "T_ij maps points of cloud i into the frame of cloud j (x_j = T_ij x_i); row-major 4x4";
-
-/// Names of the three transforms, in loop order.
-const PAIRS: [&str; 3] = ["T12", "T23", "T31"];
 
 /// A results folder ready to be written.
 #[derive(Debug)]
@@ -162,10 +159,10 @@ fn check_output(dir: &Path, inputs: &[PathBuf]) -> CliResult<()> {
 
 /// What a run used and produced, for the files.
 pub struct RunRecord<'a> {
-    /// The input files, in loop order.
+    /// The input files, in the order given.
     pub inputs: &'a [PathBuf],
     /// The clouds as read.
-    pub clouds: &'a [PointCloud; 3],
+    pub clouds: &'a [PointCloud],
     /// The settings of the run (its seed is filled in from the result).
     pub config: &'a Config,
     /// The registration.
@@ -178,22 +175,54 @@ fn write_file(path: &Path, contents: &[u8]) -> CliResult<()> {
     std::fs::write(path, contents).map_err(|e| Failure(format!("{}: {e}", path.display())))
 }
 
-/// The content of `result.json`.
+/// The name of each edge (`T12`: cloud 1 into cloud 2), in edge order.
+fn edge_names(r: &Registration) -> Vec<String> {
+    (0..r.edges.len()).map(|k| r.edge_name(k)).collect()
+}
+
+/// The content of `result.json`. Clouds are numbered from 1, as in the transform names.
 pub fn result_json(rec: &RunRecord<'_>) -> serde_json::Value {
     let r = rec.result;
-    let [t12, t23, t31] = r.transforms;
+    let names = edge_names(r);
+    let edges: Vec<serde_json::Value> = r
+        .edges
+        .iter()
+        .zip(&names)
+        .map(|(e, name)| {
+            serde_json::json!({
+                "name": name,
+                "source": e.source + 1,
+                "target": e.target + 1,
+                "t_target_source": matrix_rows(&e.t_target_source),
+                "evolution_costs": { "original": e.original_cost, "aiding": e.aiding_cost },
+            })
+        })
+        .collect();
+    let transforms: serde_json::Map<String, serde_json::Value> = r
+        .edges
+        .iter()
+        .zip(&names)
+        .map(|(e, name)| (name.clone(), serde_json::json!(matrix_rows(&e.t_target_source))))
+        .collect();
     serde_json::json!({
+        "mtpcr_version": env!("CARGO_PKG_VERSION"),
         "inputs": rec.inputs.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
+        "points": rec.clouds.iter().map(PointCloud::len).collect::<Vec<_>>(),
         "convention": CONVENTION,
-        "transforms": { "T12": matrix_rows(&t12), "T23": matrix_rows(&t23), "T31": matrix_rows(&t31) },
+        "completed": r.completed,
+        "edges": edges,
+        "transforms": transforms,
+        "poses": r.poses.iter().map(matrix_rows).collect::<Vec<_>>(),
+        "poses_note": "poses[k] maps cloud k+1 into the frame of cloud 1",
         "loop_residual": r.loop_residual(),
-        "best_costs": { "original": r.best_costs.original, "aiding": r.best_costs.aiding },
         "evaluations": r.evaluations,
+        "generations_run": r.generations_run,
         "seconds": r.seconds,
         "seed": r.seed,
         "settings": Config { seed: Some(r.seed), ..rec.config.clone() },
-        "task_names": TASK_NAMES,
+        "task_names": r.task_names,
         "history": r.history,
+        "history_note": "best cost of each task per generation of the kept restart (the one with the lowest final original costs), before refinement",
     })
 }
 
@@ -203,11 +232,12 @@ pub fn transforms_text(rec: &RunRecord<'_>) -> String {
     for (i, p) in rec.inputs.iter().enumerate() {
         s.push_str(&format!("# cloud {}: {}\n", i + 1, p.display()));
     }
-    for (k, name) in PAIRS.iter().enumerate() {
-        let (i, j) = (k + 1, (k + 1) % 3 + 1);
+    for (e, name) in rec.result.edges.iter().zip(edge_names(rec.result)) {
         s.push_str(&format!(
-            "\n{name} (maps cloud {i} into the frame of cloud {j}):\n{}",
-            matrix_text(&rec.result.transforms[k])
+            "\n{name} (maps cloud {} into the frame of cloud {}):\n{}",
+            e.source + 1,
+            e.target + 1,
+            matrix_text(&e.t_target_source)
         ));
     }
     s
@@ -233,31 +263,50 @@ pub fn write_results(dir: &Path, rec: &RunRecord<'_>) -> CliResult<Vec<PathBuf>>
 
     write_file(&path("transforms.txt"), transforms_text(rec).as_bytes())?;
 
-    let poses = rec.result.poses();
-    let moved: [PointCloud; 3] = std::array::from_fn(|i| rec.clouds[i].transformed(&poses[i]));
+    let moved: Vec<PointCloud> = rec
+        .clouds
+        .iter()
+        .zip(&rec.result.poses)
+        .map(|(c, pose)| c.transformed(pose))
+        .collect();
     let mut points = Vec::with_capacity(moved.iter().map(PointCloud::len).sum());
     let mut colors = Vec::with_capacity(points.capacity());
     for (i, c) in moved.iter().enumerate() {
         points.extend_from_slice(c.points());
-        colors.extend(std::iter::repeat_n(plots::VIEW_COLORS[i], c.len()));
+        colors.extend(std::iter::repeat_n(plots::view_color(i), c.len()));
     }
     write_ply(path("merged.ply"), &points, Some(&colors))?;
 
-    plots::convergence_png(&rec.result.history, &path("convergence.png"))?;
-
-    let labels: [String; 3] = std::array::from_fn(|i| {
-        let name = rec.inputs[i].file_name().map_or_else(
-            || rec.inputs[i].display().to_string(),
-            |n| n.to_string_lossy().into_owned(),
-        );
-        format!("cloud {}: {name}", i + 1)
-    });
-    plots::views_png(
-        std::array::from_fn(|i| rec.clouds[i].points()),
-        std::array::from_fn(|i| moved[i].points()),
-        &labels,
-        &path("views.png"),
+    let restarts = rec.config.restarts;
+    let title = if restarts > 1 {
+        format!(
+            "Best cost per generation of each task (the kept one of {restarts} restarts: the lowest final original costs)"
+        )
+    } else {
+        "Best cost per generation of each task".to_string()
+    };
+    plots::convergence_png(
+        &rec.result.history,
+        &rec.result.task_names,
+        &title,
+        &path("convergence.png"),
     )?;
+
+    let labels: Vec<String> = rec
+        .inputs
+        .iter()
+        .enumerate()
+        .map(|(i, input)| {
+            let name = input.file_name().map_or_else(
+                || input.display().to_string(),
+                |n| n.to_string_lossy().into_owned(),
+            );
+            format!("cloud {}: {name}", i + 1)
+        })
+        .collect();
+    let before: Vec<&[[f64; 3]]> = rec.clouds.iter().map(PointCloud::points).collect();
+    let after: Vec<&[[f64; 3]]> = moved.iter().map(PointCloud::points).collect();
+    plots::views_png(&before, &after, &labels, &path("views.png"))?;
     Ok(OUTPUT_FILES.iter().map(|n| path(n)).collect())
 }
 

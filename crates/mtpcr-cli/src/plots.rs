@@ -3,7 +3,6 @@
 //! the charts are readable on machines without fonts.
 
 use crate::error::{CliResult, Failure};
-use mtpcr_core::TASK_NAMES;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::{register_font, FontStyle};
@@ -15,13 +14,43 @@ static DEJAVU_SANS: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
 /// The family name the embedded font is registered under.
 const FONT: &str = "sans-serif";
 
-/// One colour per view (cloud 1, 2, 3), also used in `merged.ply`.
-pub const VIEW_COLORS: [[u8; 3]; 3] = [[214, 39, 40], [44, 160, 44], [31, 119, 180]];
-/// One colour per pair (J1, J2, J3) in the convergence chart.
-const TASK_COLORS: [RGBColor; 3] = [
+/// One colour per view (cloud 1, 2, 3, ...; repeated beyond 20), also used in `merged.ply`.
+pub const VIEW_COLORS: [[u8; 3]; 20] = [
+    [214, 39, 40],
+    [44, 160, 44],
+    [31, 119, 180],
+    [255, 127, 14],
+    [148, 103, 189],
+    [140, 86, 75],
+    [227, 119, 194],
+    [127, 127, 127],
+    [188, 189, 34],
+    [23, 190, 207],
+    [152, 223, 138],
+    [255, 152, 150],
+    [174, 199, 232],
+    [255, 187, 120],
+    [197, 176, 213],
+    [196, 156, 148],
+    [247, 182, 210],
+    [199, 199, 199],
+    [219, 219, 141],
+    [158, 218, 229],
+];
+
+/// The colour of view `i`.
+pub fn view_color(i: usize) -> [u8; 3] {
+    VIEW_COLORS[i % VIEW_COLORS.len()]
+}
+
+/// One colour per edge (J1, J2, J3, ...) in the convergence chart.
+const TASK_COLORS: [RGBColor; 6] = [
     RGBColor(31, 119, 180),
     RGBColor(255, 127, 14),
     RGBColor(148, 103, 189),
+    RGBColor(44, 160, 44),
+    RGBColor(214, 39, 40),
+    RGBColor(140, 86, 75),
 ];
 /// Points drawn per panel of `views.png` (all three clouds together), at most.
 const POINTS_PER_PANEL: usize = 20_000;
@@ -71,8 +100,14 @@ fn text(e: impl std::fmt::Display) -> String {
 }
 
 /// `convergence.png`: the best cost of each task per generation (row 0 is the initial
-/// population); aiding tasks J1-a..J3-a on the left, original tasks J1-o..J3-o on the right.
-pub fn convergence_png(history: &[[f64; 6]], path: &Path) -> CliResult<()> {
+/// population) of the kept evolution; aiding tasks J1-a, J2-a, ... on the left, original
+/// tasks J1-o, J2-o, ... on the right. `title` says which evolution it is.
+pub fn convergence_png(
+    history: &[Vec<f64>],
+    task_names: &[String],
+    title: &str,
+    path: &Path,
+) -> CliResult<()> {
     if history.is_empty() {
         return Err(Failure(format!(
             "{}: the run has no history to plot",
@@ -83,15 +118,16 @@ pub fn convergence_png(history: &[[f64; 6]], path: &Path) -> CliResult<()> {
         root.fill(&WHITE).map_err(text)?;
         let root = root
             .margin(6, 0, 0, 0)
-            .titled("Best cost per generation of the six tasks", (FONT, 26))
+            .titled(title, (FONT, 26))
             .map_err(text)?;
         let panels = root.split_evenly((1, 2));
         let titles = [
             "Aiding tasks: mean capped distance (data units)",
             "Original tasks: 1 - inlier fraction + loop term",
         ];
+        let edges = task_names.len() / 2;
         for (k, panel) in panels.iter().enumerate() {
-            draw_costs(panel, history, 3 * k, titles[k]).map_err(text)?;
+            draw_costs(panel, history, task_names, (edges * k, edges), titles[k]).map_err(text)?;
         }
         Ok(())
     })
@@ -99,14 +135,15 @@ pub fn convergence_png(history: &[[f64; 6]], path: &Path) -> CliResult<()> {
 
 fn draw_costs<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
-    history: &[[f64; 6]],
-    first: usize,
+    history: &[Vec<f64>],
+    task_names: &[String],
+    (first, count): (usize, usize),
     title: &str,
 ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
-    let series: Vec<Series> = (0..3)
+    let series: Vec<Series> = (0..count)
         .map(|k| Series {
-            label: TASK_NAMES[first + k].to_string(),
-            color: TASK_COLORS[k],
+            label: task_names[first + k].clone(),
+            color: TASK_COLORS[k % TASK_COLORS.len()],
             values: history.iter().map(|row| row[first + k]).collect(),
         })
         .collect();
@@ -189,26 +226,28 @@ const METHOD_COLORS: [RGBColor; 8] = [
     RGBColor(127, 127, 127),
 ];
 
-/// A convergence chart comparing methods: a 3x2 grid, row k pair k, aiding task J<k>-a on
-/// the left and original task J<k>-o on the right; one line per method (`(label, history)`,
-/// the history already averaged over runs).
+/// A convergence chart comparing methods: one row per edge k, aiding task J<k>-a on the
+/// left and original task J<k>-o on the right; one line per method (`(label, history)`, the
+/// history already averaged over runs).
 pub(crate) fn methods_convergence_png(
-    methods: &[(String, Vec<[f64; 6]>)],
+    methods: &[(String, Vec<Vec<f64>>)],
+    task_names: &[String],
     title: &str,
     path: &Path,
 ) -> CliResult<()> {
     if methods.iter().all(|(_, h)| h.is_empty()) {
         return Err(Failure(format!("{}: no history to plot", path.display())));
     }
-    render_png(path, (1400, 1500), |root| {
+    let edges = task_names.len() / 2;
+    render_png(path, (1400, 500 * edges.max(1) as u32), |root| {
         root.fill(&WHITE).map_err(text)?;
         let root = root
             .margin(6, 0, 0, 0)
             .titled(title, (FONT, 26))
             .map_err(text)?;
-        let panels = root.split_evenly((3, 2));
-        for pair in 0..3 {
-            for (col, (first, kind)) in [(0, "aiding"), (3, "original")].into_iter().enumerate() {
+        let panels = root.split_evenly((edges, 2));
+        for pair in 0..edges {
+            for (col, (first, kind)) in [(0, "aiding"), (edges, "original")].into_iter().enumerate() {
                 let task = first + pair;
                 let series: Vec<Series> = methods
                     .iter()
@@ -219,7 +258,7 @@ pub(crate) fn methods_convergence_png(
                         values: history.iter().map(|row| row[task]).collect(),
                     })
                     .collect();
-                let caption = format!("{} ({kind} task), mean over runs", TASK_NAMES[task]);
+                let caption = format!("{} ({kind} task), mean over runs", task_names[task]);
                 draw_series(&panels[2 * pair + col], &series, &caption, (18, 14, 2))
                     .map_err(text)?;
             }
@@ -389,23 +428,31 @@ fn subsample(points: &[[f64; 3]], budget: usize) -> impl Iterator<Item = &[f64; 
     points.iter().step_by(step)
 }
 
+/// Legend entries per row of `views.png`.
+const LEGEND_COLUMNS: usize = 4;
+
 /// `views.png`: a 2x2 grid, rows before (each cloud as given, in its own frame) and after
 /// registration (merged in cloud 1's frame), columns two orthographic viewpoints; points
 /// drawn far to near, coloured per view. `labels` name the clouds in the legend.
 pub fn views_png(
-    before: [&[[f64; 3]]; 3],
-    after: [&[[f64; 3]]; 3],
-    labels: &[String; 3],
+    before: &[&[[f64; 3]]],
+    after: &[&[[f64; 3]]],
+    labels: &[String],
     path: &Path,
 ) -> CliResult<()> {
-    let (width, height) = (1300u32, 1390u32);
+    let legend_rows = labels.len().div_ceil(LEGEND_COLUMNS).max(1) as u32;
+    let (width, height) = (1300u32, 1340 + 50 * legend_rows);
     render_png(path, (width, height), |root| {
         root.fill(&WHITE).map_err(text)?;
         let root = root
             .margin(6, 0, 0, 0)
-            .titled("The three views before and after registration", (FONT, 26))
+            .titled(
+                &format!("The {} views before and after registration", labels.len()),
+                (FONT, 26),
+            )
             .map_err(text)?;
-        let (grid, legend) = root.split_vertically(root.dim_in_pixel().1 as i32 - 50);
+        let (grid, legend) =
+            root.split_vertically(root.dim_in_pixel().1 as i32 - 50 * legend_rows as i32);
         let panels = grid.split_evenly((2, 2));
         for (row, (clouds, what)) in [
             (before, "before: as given, each in its own frame"),
@@ -425,12 +472,12 @@ pub fn views_png(
 
 fn draw_view<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
-    clouds: [&[[f64; 3]]; 3],
+    clouds: &[&[[f64; 3]]],
     view: &Viewpoint,
     caption: &str,
 ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
     let area = area.titled(caption, (FONT, 19))?;
-    let budget = POINTS_PER_PANEL / 3;
+    let budget = POINTS_PER_PANEL / clouds.len().max(1);
     let mut points: Vec<(f64, f64, f64, usize)> = Vec::with_capacity(POINTS_PER_PANEL + 3);
     for (i, cloud) in clouds.iter().enumerate() {
         points.extend(subsample(cloud, budget).map(|p| {
@@ -486,25 +533,24 @@ fn draw_view<DB: DrawingBackend>(
         .light_line_style(RGBColor(240, 240, 240))
         .bold_line_style(RGBColor(220, 220, 220))
         .draw()?;
-    let colors = VIEW_COLORS.map(rgb);
     chart.draw_series(
         points
             .iter()
-            .map(|&(x, y, _, i)| Circle::new((x, y), 1, colors[i].filled())),
+            .map(|&(x, y, _, i)| Circle::new((x, y), 1, rgb(view_color(i)).filled())),
     )?;
     Ok(())
 }
 
 fn draw_legend<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
-    labels: &[String; 3],
+    labels: &[String],
 ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
-    let (w, h) = area.dim_in_pixel();
-    let slot = w as i32 / 3;
-    let y = h as i32 / 2;
+    let (w, _) = area.dim_in_pixel();
+    let slot = w as i32 / LEGEND_COLUMNS.min(labels.len()).max(1) as i32;
     for (i, label) in labels.iter().enumerate() {
-        let x = slot * i as i32 + 40;
-        area.draw(&Circle::new((x, y), 8, rgb(VIEW_COLORS[i]).filled()))?;
+        let x = slot * (i % LEGEND_COLUMNS) as i32 + 40;
+        let y = 25 + 50 * (i / LEGEND_COLUMNS) as i32;
+        area.draw(&Circle::new((x, y), 8, rgb(view_color(i)).filled()))?;
         let style =
             TextStyle::from((FONT, 19).into_font()).pos(plotters::style::text_anchor::Pos::new(
                 plotters::style::text_anchor::HPos::Left,
@@ -548,13 +594,14 @@ mod tests {
     fn figures_are_png_files() {
         let dir = std::env::temp_dir().join(format!("mtpcr-cli-plots-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
-        let history: Vec<[f64; 6]> = (0..6).map(|g| [1.0 / (g + 1) as f64; 6]).collect();
-        convergence_png(&history, &dir.join("c.png")).unwrap();
+        let history: Vec<Vec<f64>> = (0..6).map(|g| vec![1.0 / (g + 1) as f64; 6]).collect();
+        let names = mtpcr_core::ViewGraph::ring(3).unwrap().task_names();
+        convergence_png(&history, &names, "t", &dir.join("c.png")).unwrap();
         let methods = vec![
             ("a".to_string(), history.clone()),
             ("b".to_string(), history),
         ];
-        methods_convergence_png(&methods, "t", &dir.join("m.png")).unwrap();
+        methods_convergence_png(&methods, &names, "t", &dir.join("m.png")).unwrap();
         let labels: Vec<String> = ["0.01", "0.1", "0.5"].map(String::from).to_vec();
         let panel = |name: &str| CategoryPanel {
             title: name.to_string(),
@@ -573,8 +620,8 @@ mod tests {
         let cloud: Vec<[f64; 3]> = (0..500).map(|i| [i as f64, (i % 7) as f64, 0.5]).collect();
         let labels = ["a".to_string(), "b".to_string(), "c".to_string()];
         views_png(
-            [&cloud, &cloud, &cloud],
-            [&cloud, &cloud, &cloud],
+            &[&cloud, &cloud, &cloud],
+            &[&cloud, &cloud, &cloud],
             &labels,
             &dir.join("v.png"),
         )

@@ -2,7 +2,7 @@
 //! them everywhere.
 
 use indicatif::{ProgressBar, ProgressStyle};
-use mtpcr_core::{Progress, TASK_NAMES};
+use mtpcr_core::Progress;
 use std::ops::ControlFlow;
 use std::time::Duration;
 
@@ -44,27 +44,22 @@ pub fn run_bar(runs: usize, quiet: bool, label: &str) -> ProgressBar {
     )
 }
 
-/// The observer that moves `bar` after each generation and shows the best original costs.
+/// The observer that moves `bar` after each generation and shows the best original costs
+/// (the second half of the task slots).
 pub fn observe(bar: &ProgressBar) -> impl FnMut(&Progress) -> ControlFlow<()> + '_ {
     move |p: &Progress| {
         bar.set_length(p.generations as u64);
         bar.set_position(p.generation as u64);
-        bar.set_message(format!(
-            "best {} {:.4} {} {:.4} {} {:.4}",
-            TASK_NAMES[3],
-            p.best_costs[3],
-            TASK_NAMES[4],
-            p.best_costs[4],
-            TASK_NAMES[5],
-            p.best_costs[5]
-        ));
+        let original = &p.best_costs[p.best_costs.len() / 2..];
+        let shown: Vec<String> = original.iter().map(|c| format!("{c:.4}")).collect();
+        bar.set_message(format!("best original costs {}", shown.join(" ")));
         ControlFlow::Continue(())
     }
 }
 
 /// Registers with a generation bar on stderr; the bar is cleared when the run ends.
 pub fn register_with_bar(
-    clouds: &[mtpcr_core::PointCloud; 3],
+    clouds: &[mtpcr_core::PointCloud],
     config: &mtpcr_core::Config,
     quiet: bool,
     label: &str,

@@ -4,6 +4,7 @@
 
 use crate::error::{CliResult, Failure};
 use clap::Args;
+use mtpcr_core::config::FIELDS;
 use mtpcr_core::{Config, Method, Sampling, SearchMethod};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -26,68 +27,50 @@ pub struct RunArgs {
 }
 
 /// One flag per [`Config`] field (the flag is the field name with `-` for `_`; `num_threads`
-/// is `--threads`). Unset flags keep the config file's or the default value.
+/// is `--threads`). Unset flags keep the config file's or the default value. The help of
+/// each flag is the field's documentation in `mtpcr_core::config::FIELDS`, set by
+/// [`document`] with its default and paper values.
 #[derive(Args, Clone, Debug, Default)]
 #[command(next_help_heading = "Settings (config-file keys are the flag names with _ for -)")]
 pub struct SettingsArgs {
-    /// Evolutionary algorithm: mtpcr (the paper's method), or the baselines mfea, gmfea.
     #[arg(long, value_name = "METHOD", value_parser = parse_name::<Method>)]
     pub method: Option<Method>,
-    /// Individuals per population (six populations), at least 4.
     #[arg(long, value_name = "N")]
     pub population_size: Option<usize>,
-    /// Generations after the initial one.
     #[arg(long, value_name = "N")]
     pub generations: Option<usize>,
-    /// Fraction of each cloud's points kept by downsampling, in (0, 1].
     #[arg(long, value_name = "RATIO")]
     pub sample_ratio: Option<f64>,
-    /// Downsampling method: farthest (farthest-point sampling) or random.
     #[arg(long, value_name = "METHOD", value_parser = parse_name::<Sampling>)]
     pub sampling: Option<Sampling>,
-    /// Probability of intra-task sharing (aiding <-> original elites), in [0, 1].
     #[arg(long, value_name = "P")]
     pub p_intra: Option<f64>,
-    /// Probability of inter-task sharing (the estimate composed around the loop), in [0, 1].
     #[arg(long, value_name = "P")]
     pub p_inter: Option<f64>,
-    /// Fraction of a population kept as elites, in (0, 1].
     #[arg(long, value_name = "RATIO")]
     pub top_ratio: Option<f64>,
-    /// Differential-evolution scale factor F, in (0, 2].
     #[arg(long, value_name = "F")]
     pub scale_factor: Option<f64>,
-    /// SBX distribution index at the first generation (>= 0).
     #[arg(long, value_name = "ETA")]
     pub sbx_eta_start: Option<f64>,
-    /// SBX distribution index at the last generation (>= 0).
     #[arg(long, value_name = "ETA")]
     pub sbx_eta_end: Option<f64>,
-    /// Weight of the loop-closure term in the original tasks' loss (>= 0).
     #[arg(long, value_name = "WEIGHT")]
     pub alpha: Option<f64>,
-    /// Aiding-loss distance cap as a fraction of the largest bounding-box side, in (0, 10].
     #[arg(long, value_name = "RATIO")]
     pub aiding_cap_ratio: Option<f64>,
-    /// Aiding loss in both directions (source -> target and back).
     #[arg(long, value_name = "BOOL")]
     pub two_way_aiding: Option<bool>,
-    /// Loop term without units (translations divided by the largest bounding-box side).
     #[arg(long, value_name = "BOOL")]
     pub unit_free_loop_term: Option<bool>,
-    /// Recompute the parents' loop terms every generation.
     #[arg(long, value_name = "BOOL")]
     pub refresh_loop_term: Option<bool>,
-    /// Search structure of the losses: fast (grid, same inlier counts) or exact (KD-tree).
     #[arg(long, value_name = "METHOD", value_parser = parse_name::<SearchMethod>)]
     pub search: Option<SearchMethod>,
-    /// Independent evolutions; the one with the lowest original costs is kept (>= 1).
     #[arg(long, value_name = "N")]
     pub restarts: Option<usize>,
-    /// Joint trimmed-ICP iterations of the three clouds after the evolution (0 = off).
     #[arg(long, value_name = "N")]
     pub refine_iterations: Option<usize>,
-    /// Worker threads; 0 = all cores (the result does not depend on it).
     #[arg(long = "threads", visible_alias = "num-threads", value_name = "N")]
     pub num_threads: Option<usize>,
 }
@@ -181,7 +164,7 @@ pub fn resolve(run: &RunArgs, seed: Option<u64>) -> CliResult<Config> {
 }
 
 /// Reads a TOML config file over `base`: keys in the file replace `base`'s values, the others
-/// stay. Returns the config and the keys the file set.
+/// stay (merged by `Config::with_overrides`). Returns the config and the keys the file set.
 pub fn read_config_file(path: &Path, base: &Config) -> CliResult<(Config, Vec<String>)> {
     let text = std::fs::read_to_string(path).map_err(|e| {
         Failure(format!(
@@ -189,22 +172,20 @@ pub fn read_config_file(path: &Path, base: &Config) -> CliResult<(Config, Vec<St
             path.display()
         ))
     })?;
-    let bad = |e: toml::de::Error| {
+    let bad = |e: &dyn std::fmt::Display| {
         Failure(format!(
             "{}: not a valid mtpcr config file (see `mtpcr dump-config`): {}",
             path.display(),
             e.to_string().trim_end()
         ))
     };
-    // Parsing into Config first gives errors with line numbers and names unknown keys.
-    let _: Config = toml::from_str(&text).map_err(bad)?;
-    let file: toml::Table = toml::from_str(&text).map_err(bad)?;
-    let mut merged: toml::Table =
-        toml::from_str(&toml::to_string(base).map_err(|e| Failure(e.to_string()))?)
-            .map_err(|e| Failure(e.to_string()))?;
+    let file: toml::Table = toml::from_str(&text).map_err(|e| bad(&e))?;
     let keys: Vec<String> = file.keys().cloned().collect();
-    merged.extend(file);
-    let config: Config = merged.try_into().map_err(bad)?;
+    let serde_json::Value::Object(overrides) = serde_json::to_value(&file).map_err(|e| bad(&e))?
+    else {
+        return Err(bad(&"not a table of settings"));
+    };
+    let config = base.with_overrides(&overrides).map_err(|e| bad(&e))?;
     Ok((config, keys))
 }
 
@@ -247,30 +228,56 @@ pub fn config_toml(
     Ok(out)
 }
 
-/// Help text of the flag of each config field, from the `register` subcommand's arguments.
-pub fn field_help(cli: &clap::Command) -> BTreeMap<String, String> {
-    let mut help = BTreeMap::new();
-    let Some(register) = cli.find_subcommand("register") else {
-        return help;
-    };
-    let Ok(serde_json::Value::Object(fields)) = serde_json::to_value(Config::default()) else {
-        return help;
-    };
-    for field in fields.keys() {
-        if field == "seed" {
-            continue;
-        }
-        let flag = flag_of(field);
-        let text = register
-            .get_arguments()
-            .find(|a| a.get_long().is_some_and(|l| format!("--{l}") == flag))
-            .and_then(|a| a.get_help())
-            .map(|h| h.to_string());
-        if let Some(t) = text {
-            help.insert(field.clone(), t);
-        }
+/// The documentation of each config field (from `mtpcr_core::config::FIELDS`), one line each.
+pub fn field_help() -> BTreeMap<String, String> {
+    FIELDS
+        .iter()
+        .map(|f| (f.name.to_string(), f.text()))
+        .collect()
+}
+
+/// A setting's value as the CLI and config files write it (`fast`, `0.05`, `true`, `none`).
+fn shown(value: &serde_json::Value) -> String {
+    match value {
+        serde_json::Value::String(s) => s.clone(),
+        serde_json::Value::Null => "none".to_string(),
+        v => v.to_string(),
     }
-    help
+}
+
+/// `cmd` with the help of every settings flag of its subcommands taken from the core's field
+/// documentation, followed by the default and paper values.
+pub fn document(mut cmd: clap::Command) -> clap::Command {
+    let values = |c: Config| match serde_json::to_value(c) {
+        Ok(serde_json::Value::Object(m)) => m,
+        _ => serde_json::Map::new(),
+    };
+    let (default, paper) = (values(Config::default()), values(Config::paper()));
+    let subcommands: Vec<String> = cmd
+        .get_subcommands()
+        .map(|s| s.get_name().to_string())
+        .collect();
+    for sub in subcommands {
+        cmd = cmd.mut_subcommand(sub, |mut sc| {
+            for field in FIELDS {
+                if field.name == "seed" || sc.get_arguments().all(|a| a.get_id() != field.name) {
+                    continue;
+                }
+                let text = field.text();
+                let values = match (default.get(field.name), paper.get(field.name)) {
+                    (Some(d), Some(p)) => format!(" [default: {}; paper: {}]", shown(d), shown(p)),
+                    _ => String::new(),
+                };
+                let short = text.split(". ").next().unwrap_or(&text).trim_end_matches('.').to_string();
+                sc = sc.mut_arg(field.name, |a| {
+                    a.help(format!("{short}{values}"))
+                        .long_help(format!("{text}{values}"))
+                });
+            }
+            sc
+        });
+    }
+    cmd
 }
 
 #[cfg(test)]
@@ -329,7 +336,7 @@ mod tests {
 
     #[test]
     fn dumped_defaults_parse_back_and_carry_help() {
-        let help = field_help(&crate::Cli::command());
+        let help = field_help();
         assert!(help.contains_key("population_size") && help.contains_key("num_threads"));
         for base in [Config::default(), Config::paper()] {
             let text = config_toml(&base, &help, "test").unwrap();

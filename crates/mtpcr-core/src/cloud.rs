@@ -121,18 +121,7 @@ impl PointCloud {
 
     /// Axis-aligned bounds `(min, max)`; both are zero for an empty cloud.
     pub fn bounds(&self) -> ([f64; 3], [f64; 3]) {
-        if self.points.is_empty() {
-            return ([0.0; 3], [0.0; 3]);
-        }
-        let mut lo = [f64::INFINITY; 3];
-        let mut hi = [f64::NEG_INFINITY; 3];
-        for p in &self.points {
-            for k in 0..3 {
-                lo[k] = lo[k].min(p[k]);
-                hi[k] = hi[k].max(p[k]);
-            }
-        }
-        (lo, hi)
+        bounds(&self.points)
     }
 
     /// The longest side of the axis-aligned bounding box.
@@ -273,6 +262,22 @@ impl PointCloud {
             .collect();
         Ok(PointCloud { points })
     }
+}
+
+/// Axis-aligned bounds `(min, max)` of points; both are zero for no points.
+pub fn bounds(points: &[[f64; 3]]) -> ([f64; 3], [f64; 3]) {
+    if points.is_empty() {
+        return ([0.0; 3], [0.0; 3]);
+    }
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for p in points {
+        for k in 0..3 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    (lo, hi)
 }
 
 impl From<Vec<[f64; 3]>> for PointCloud {

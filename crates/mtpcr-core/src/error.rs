@@ -47,6 +47,14 @@ pub enum Error {
         /// What is wrong and what is allowed.
         problem: String,
     },
+    /// A setting was given by a name that is not a field of `Config`.
+    #[error("unknown setting `{name}` (settings are: {known})")]
+    UnknownSetting {
+        /// The name given.
+        name: String,
+        /// The known names, comma separated.
+        known: String,
+    },
     /// A file could not be opened, read or written.
     #[error("{}: {source}", path.display())]
     Io {

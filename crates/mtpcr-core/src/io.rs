@@ -1,5 +1,4 @@
-//! Files: PLY point clouds (read ASCII and binary, write binary), registration problems
-//! (`shared/problems/*.json`) and transforms out.
+//! Files: PLY point clouds (read ASCII and binary, write binary) and transforms out.
 //!
 //! Real scans are messy. Stanford range scans carry an extra `range_grid` element after the
 //! vertices and some have non-standard header lines (`bye`); the reader skips header lines
@@ -7,7 +6,7 @@
 
 use crate::cloud::PointCloud;
 use crate::error::{Error, Result};
-use crate::se3::{is_rigid, Transform};
+use crate::se3::Transform;
 use ply_rs_bw::parser::{Parser, Reader};
 use ply_rs_bw::ply::{
     Addable, ElementDef, Encoding, Header, Property, PropertyAccess, PropertyDef, PropertyType,
@@ -15,7 +14,9 @@ use ply_rs_bw::ply::{
 };
 use ply_rs_bw::writer::Writer;
 use std::io::{BufReader, BufWriter, Cursor, Read, Write};
-use std::path::{Path, PathBuf};
+use std::path::Path;
+#[cfg(test)]
+use std::path::PathBuf;
 
 /// Header keywords of the PLY format; any other header line is skipped.
 const PLY_KEYWORDS: [&str; 6] = [
@@ -240,88 +241,6 @@ pub fn write_ply(
         .and_then(|_| writer.write_payload_of_element(&mut out, &elements, &vertex, &header))
         .map_err(|e| Error::io(path, e))?;
     out.flush().map_err(|e| Error::io(path, e))
-}
-
-/// A three-view registration problem with ground truth, as in `shared/problems/*.json`.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Problem {
-    /// Short name (`bunny-a`).
-    pub name: String,
-    /// The three scans, resolved against the data root.
-    pub scans: [PathBuf; 3],
-    /// Ground-truth scan-to-world poses: `x_world = pose_i x_i`.
-    pub poses: [Transform; 3],
-}
-
-#[derive(serde::Deserialize)]
-struct ProblemFile {
-    name: String,
-    scans: Vec<String>,
-    poses: Vec<[[f64; 4]; 4]>,
-}
-
-impl Problem {
-    /// Reads a problem file. Scan paths are resolved against `data_root` when given, else
-    /// against the parent of the folder that holds the problem file (the layout of `shared/`).
-    pub fn load(path: impl AsRef<Path>, data_root: Option<&Path>) -> Result<Problem> {
-        let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-        let file: ProblemFile = serde_json::from_str(&text)
-            .map_err(|e| Error::malformed(path, format!("not a valid problem file: {e}")))?;
-        if file.scans.len() != 3 || file.poses.len() != 3 {
-            return Err(Error::malformed(
-                path,
-                format!(
-                    "a problem needs 3 scans and 3 poses, found {} and {}",
-                    file.scans.len(),
-                    file.poses.len()
-                ),
-            ));
-        }
-        let root: PathBuf = match data_root {
-            Some(r) => r.to_path_buf(),
-            None => path
-                .parent()
-                .and_then(Path::parent)
-                .map(Path::to_path_buf)
-                .unwrap_or_else(|| PathBuf::from(".")),
-        };
-        let mut poses = [Transform::identity(); 3];
-        for (k, p) in file.poses.iter().enumerate() {
-            let m = Transform::from_fn(|i, j| p[i][j]);
-            if !is_rigid(&m, 1e-5) {
-                return Err(Error::malformed(
-                    path,
-                    format!("pose {} is not a rigid transform", k + 1),
-                ));
-            }
-            poses[k] = m;
-        }
-        let scans = [
-            root.join(&file.scans[0]),
-            root.join(&file.scans[1]),
-            root.join(&file.scans[2]),
-        ];
-        Ok(Problem {
-            name: file.name,
-            scans,
-            poses,
-        })
-    }
-
-    /// The ground truth `[T12, T23, T31]` (`T_ij = pose_j^-1 pose_i` maps scan i into scan j).
-    pub fn ground_truth(&self) -> [Transform; 3] {
-        crate::eval::loop_from_poses(&self.poses)
-    }
-
-    /// Reads the three scans.
-    pub fn read_scans(&self) -> Result<[PointCloud; 3]> {
-        Ok([
-            read_ply(&self.scans[0])?,
-            read_ply(&self.scans[1])?,
-            read_ply(&self.scans[2])?,
-        ])
-    }
 }
 
 /// A transform as row-major nested lists (for JSON output).

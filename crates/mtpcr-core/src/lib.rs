@@ -1,46 +1,57 @@
 //! # mtpcr-core
 //!
 //! Multi-view point cloud registration by evolutionary multitasking (MTPCR; Wu et al., IEEE
-//! TETCI). Three overlapping scans that form a loop are registered with no initial guess:
-//! six populations evolve together (three original pairwise tasks whose loss adds a
-//! loop-closure term, three easier aiding tasks) and share knowledge inside each pair and
-//! across the loop.
+//! TETCI): overlapping scans are registered with no initial guess. Each edge of a view graph
+//! (a pair of scans) is a pair of tasks, the original one (inlier ratio, plus a loop-closure
+//! term on a loop) and an easier aiding one; their populations evolve together and share
+//! knowledge inside each pair and around the loop.
 //!
 //! Pipeline: [`PointCloud`]s -> [`PreparedProblem`] (downsampled, centred, eps and shift,
-//! search structures) -> evolution -> [`Registration`] with T12, T23, T31.
+//! search structures, a [`ViewGraph`]) -> evolution of every edge -> joint refinement ->
+//! [`Registration`] with one estimate per edge and one pose per view. `ARCHITECTURE.md` in
+//! this crate's folder maps the modules.
 //!
-//! **Convention.** `T_ij` maps points of cloud i into the frame of cloud j: `x_j = T_ij x_i`.
+//! **Convention.** `T_ij` maps points of cloud i into the frame of cloud j: `x_j = T_ij x_i`;
+//! an edge's transform is named `t_target_source`.
 //!
 //! ```
 //! use mtpcr_core::{register, synthetic, Config};
 //! let problem = synthetic::three_views(7, 6000);
 //! let config = Config { generations: 5, population_size: 20, seed: Some(1), ..Config::default() };
 //! let result = register(&problem.clouds, &config, None).unwrap();
-//! let t12 = result.transforms[0]; // maps cloud 1 into cloud 2's frame
-//! assert_eq!(result.history.len(), 6);
-//! assert!(t12[(3, 3)] == 1.0);
+//! let t12 = result.edges[0].t_target_source; // maps cloud 1 into cloud 2's frame
+//! assert_eq!((result.edges[0].source, result.edges[0].target), (0, 1));
+//! assert_eq!(result.history.len(), 4 * 5 + 1 - 3 * 5, "the kept restart's generations");
+//! assert!(result.loop_residual().unwrap() < 1e-9, "the refinement closes the loop");
+//! assert!((t12 - result.t_target_source(1, 0)).norm() == 0.0);
 //! ```
 #![warn(missing_docs)]
 
 pub mod cloud;
+pub mod config;
+mod ea;
 pub mod error;
 pub mod eval;
-mod evolve;
-pub mod fitness;
+pub mod graph;
 pub mod io;
-mod mfea;
+pub mod loss;
+pub mod problem;
 mod refine;
-pub mod registration;
+mod register;
+pub mod result;
+pub mod search;
 pub mod se3;
 pub mod synthetic;
 
 pub use cloud::{PointCloud, Sampling};
+pub use config::{Config, Method};
+pub use ea::{Observer, Progress};
 pub use error::{Error, Result};
-pub use evolve::TASK_NAMES;
-pub use fitness::SearchMethod;
-pub use registration::{
-    register, BestCosts, Config, Method, Observer, PreparedProblem, Progress, Registration,
-};
+pub use graph::{Edge, ViewGraph};
+pub use problem::{PreparedProblem, MIN_POINTS};
+pub use register::register;
+pub use result::{EdgeEstimate, Registration};
+pub use search::SearchMethod;
 pub use se3::Transform;
 
 /// The README's Rust example, compiled as a doctest so it cannot drift from the API.

@@ -1,13 +1,14 @@
-//! Optional final refinement (beyond the paper): a joint trimmed point-to-plane ICP of the
-//! three clouds (full resolution, reduced to at most 8000 plane-projected points each). It
-//! moves clouds 2 and 3 (cloud 1 stays) to fit all three overlaps at once, so the refined
-//! T12, T23, T31 close the loop exactly and a poorly overlapping pair is held by the two
+//! Optional final refinement (beyond the paper): a joint trimmed point-to-plane ICP of all
+//! clouds (full resolution, reduced to at most 8000 plane-projected points each). It moves
+//! every cloud but the first to fit all overlaps (the view graph's edges) at once, so the
+//! refined transforms of a loop close it exactly and a poorly overlapping pair is held by the
 //! others instead of sliding on its own. The plane fits grow with the scan's noise, so noise
 //! is averaged out instead of biasing the fit.
 
+use crate::graph::Edge;
 use crate::se3::Rigid;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::{DMatrix, DVector, Matrix3, SMatrix, Vector3};
 use rayon::prelude::*;
 
 /// Surface points kept per cloud for the refinement at most (a deterministic stride subset);
@@ -142,18 +143,24 @@ impl RefineCloud {
     }
 }
 
-/// Refines the poses of clouds 2 and 3 in cloud 1's frame (`poses[k]` maps cloud k into
-/// cloud 1; `poses[0]` is the identity and stays so) by `iterations` steps of joint trimmed
-/// ICP over the three pairs, in both directions. The trimming distance shrinks linearly from
-/// `3 eps` to `eps`. Deterministic for any number of threads.
-pub(crate) fn refine_loop(
-    clouds: &[RefineCloud; 3],
-    mut poses: [Rigid; 3],
+/// Refines the poses of all clouds in cloud 0's frame (`poses[k]` maps cloud k into cloud 0;
+/// `poses[0]` is the identity and stays so) by `iterations` steps of joint trimmed ICP over
+/// the `edges` (pairs of overlapping clouds, each used in both directions). The trimming
+/// distance shrinks linearly from `3 eps` to `eps`. Deterministic for any number of threads.
+pub(crate) fn refine_poses(
+    clouds: &[RefineCloud],
+    edges: &[Edge],
+    mut poses: Vec<Rigid>,
     eps: f64,
     iterations: usize,
     pool: &rayon::ThreadPool,
-) -> [Rigid; 3] {
-    const DIRECTIONS: [(usize, usize); 6] = [(0, 1), (1, 0), (1, 2), (2, 1), (2, 0), (0, 2)];
+) -> Vec<Rigid> {
+    let directions: Vec<(usize, usize)> = edges
+        .iter()
+        .flat_map(|e| [(e.source, e.target), (e.target, e.source)])
+        .collect();
+    // Six unknowns (rotation, translation) per cloud but the first.
+    let unknowns = 6 * (poses.len() - 1);
     for it in 0..iterations {
         let frac = if iterations > 1 {
             it as f64 / (iterations - 1) as f64
@@ -161,11 +168,10 @@ pub(crate) fn refine_loop(
             1.0
         };
         let max_d2 = (eps * (3.0 - 2.0 * frac)).powi(2);
-        // Normal equations of the 12 unknowns (rotation, translation of clouds 2 and 3).
-        let mut h = nalgebra::SMatrix::<f64, 12, 12>::zeros();
-        let mut g = nalgebra::SVector::<f64, 12>::zeros();
+        let mut h = DMatrix::<f64>::zeros(unknowns, unknowns);
+        let mut g = DVector::<f64>::zeros(unknowns);
         let mut matched = 0usize;
-        for &(i, j) in &DIRECTIONS {
+        for &(i, j) in &directions {
             let to_j = compose(&poses[j].inverse(), &poses[i]);
             let rj = &poses[j].r;
             let pairs: Vec<Option<Match>> = pool.install(|| {
@@ -200,24 +206,31 @@ pub(crate) fn refine_loop(
                 let (x, y, n) = (Vector3::from(x), Vector3::from(y), Vector3::from(n));
                 // Point-to-plane: the offset along the target point's normal.
                 let r = n.dot(&(x - y));
-                // d(residual)/d(xi_k) = [-[x]_x, I] for the moving side, minus that at y.
-                let mut jac = nalgebra::SMatrix::<f64, 3, 12>::zeros();
-                for (k, p, sign) in [(i, x, 1.0), (j, y, -1.0)] {
-                    if k == 0 {
-                        continue;
+                // d(residual)/d(xi_k) = n^T [-[x]_x, I] for the moving side, minus that at y;
+                // cloud 0 has no unknowns.
+                let rows: Vec<(usize, SMatrix<f64, 1, 6>)> = [(i, x, 1.0), (j, y, -1.0)]
+                    .into_iter()
+                    .filter(|&(k, _, _)| k != 0)
+                    .map(|(k, p, sign)| {
+                        let mut jac = SMatrix::<f64, 3, 6>::zeros();
+                        jac.fixed_view_mut::<3, 3>(0, 0)
+                            .copy_from(&(-p.cross_matrix() * sign));
+                        jac.fixed_view_mut::<3, 3>(0, 3)
+                            .copy_from(&(Matrix3::identity() * sign));
+                        (6 * (k - 1), n.transpose() * jac)
+                    })
+                    .collect();
+                for &(oa, ra) in &rows {
+                    for &(ob, rb) in &rows {
+                        let mut block = h.view_mut((oa, ob), (6, 6));
+                        block += ra.transpose() * rb;
                     }
-                    let o = 6 * (k - 1);
-                    let skew = p.cross_matrix();
-                    jac.fixed_view_mut::<3, 3>(0, o).copy_from(&(-skew * sign));
-                    jac.fixed_view_mut::<3, 3>(0, o + 3)
-                        .copy_from(&(Matrix3::identity() * sign));
+                    let mut part = g.rows_mut(oa, 6);
+                    part += ra.transpose() * r;
                 }
-                let row = n.transpose() * jac;
-                h += row.transpose() * row;
-                g += row.transpose() * r;
             }
         }
-        if matched < 12 {
+        if matched < unknowns {
             break;
         }
         let Some(delta) = h.lu().solve(&(-g)) else {
@@ -316,8 +329,9 @@ mod tests {
         // (the earlier fixed size) the worst pose here is 0.44 deg off; sized from the noise,
         // 0.23 deg.
         let clouds = strips(7, 0.02).map(RefineCloud::new);
+        let ring = crate::graph::ViewGraph::ring(3).unwrap();
         let (pool, start) = (two_threads(), misaligned_start());
-        let est = refine_loop(&clouds, start, 0.04, 40, &pool);
+        let est = refine_poses(&clouds, ring.edges(), start.to_vec(), 0.04, 40, &pool);
         let ident = Rigid::from_individual(&[0.0; 6]).to_matrix();
         let worst = est
             .iter()
@@ -329,8 +343,9 @@ mod tests {
     #[test]
     fn joint_refinement_corrects_small_misalignments_and_closes_the_loop() {
         let clouds = strips(2, 0.0).map(RefineCloud::new);
+        let ring = crate::graph::ViewGraph::ring(3).unwrap();
         let (pool, start) = (two_threads(), misaligned_start());
-        let est = refine_loop(&clouds, start, 0.02, 40, &pool);
+        let est = refine_poses(&clouds, ring.edges(), start.to_vec(), 0.02, 40, &pool);
         let ident = Rigid::from_individual(&[0.0; 6]).to_matrix();
         for pose in &est {
             assert!(rotation_error_deg(&pose.to_matrix(), &ident) < 0.05);
@@ -341,7 +356,7 @@ mod tests {
             .build()
             .unwrap();
         assert_eq!(
-            refine_loop(&clouds, start, 0.02, 40, &one),
+            refine_poses(&clouds, ring.edges(), start.to_vec(), 0.02, 40, &one),
             est,
             "thread count changes nothing"
         );

@@ -11,8 +11,11 @@ use rand_distr::StandardNormal;
 /// A rigid transform as a homogeneous 4x4 matrix (`x' = T x`).
 pub type Transform = Matrix4<f64>;
 
+/// Degrees of freedom of a rigid motion: the length of an [`Individual`].
+pub const DOF: usize = 6;
+
 /// One individual: three angles in degrees, then three translations in the data's units.
-pub type Individual = [f64; 6];
+pub type Individual = [f64; DOF];
 
 /// Matrix of an individual: `R = Rz(rz) Ry(ry) Rx(rx)`, translation `(tx, ty, tz)`.
 pub fn decode(x: &Individual) -> Transform {
@@ -146,6 +149,26 @@ pub fn is_rigid(t: &Transform, tol: f64) -> bool {
     let last =
         (t[(3, 0)].abs() + t[(3, 1)].abs() + t[(3, 2)].abs() + (t[(3, 3)] - 1.0).abs()).max(0.0);
     orth <= tol && (r.determinant() - 1.0).abs() <= tol && last <= tol
+}
+
+/// The rigid transform nearest to `t`: its rotation block replaced by the nearest rotation
+/// (polar decomposition by SVD, determinant +1), its translation kept, last row `0 0 0 1`.
+pub fn nearest_rigid(t: &Transform) -> Transform {
+    let r: Matrix3<f64> = t.fixed_view::<3, 3>(0, 0).into_owned();
+    let svd = r.svd(true, true);
+    let (u, v_t) = (
+        svd.u.expect("u was requested"),
+        svd.v_t.expect("v_t was requested"),
+    );
+    let mut d = Matrix3::identity();
+    d[(2, 2)] = (u * v_t).determinant().signum();
+    let rot = u * d * v_t;
+    let mut out = Transform::identity();
+    out.fixed_view_mut::<3, 3>(0, 0).copy_from(&rot);
+    for i in 0..3 {
+        out[(i, 3)] = t[(i, 3)];
+    }
+    out
 }
 
 /// Frobenius norm of the difference of the rotation blocks, `||R_a - R_b||_F` (the paper's

@@ -12,9 +12,9 @@ use rand_distr::StandardNormal;
 #[derive(Clone, Debug)]
 pub struct SyntheticProblem {
     /// The three views, each in its own frame.
-    pub clouds: [PointCloud; 3],
+    pub clouds: Vec<PointCloud>,
     /// `[T12, T23, T31]` (T_ij maps view i into view j's frame).
-    pub ground_truth: [Transform; 3],
+    pub ground_truth: Vec<Transform>,
 }
 
 /// Size of the shape (about the bounding-box side), in metres: bunny-like.
@@ -85,7 +85,7 @@ pub fn three_views(seed: u64, points_per_view: usize) -> SyntheticProblem {
         [a.cos() * e.cos(), e.sin(), a.sin() * e.cos()]
     });
     let motions: [Transform; 3] = std::array::from_fn(|_| random_rigid(&mut rng, SHAPE_SIZE));
-    let clouds: [PointCloud; 3] = std::array::from_fn(|i| {
+    let clouds: Vec<PointCloud> = (0..3).map(|i| {
         let v = views[i];
         let mut pts = Vec::with_capacity(points_per_view);
         // Visible: the radial direction faces the viewer (a bit beyond the hemisphere).
@@ -96,8 +96,10 @@ pub fn three_views(seed: u64, points_per_view: usize) -> SyntheticProblem {
             }
         }
         PointCloud::new(pts).transformed(&motions[i])
-    });
-    let ground_truth = std::array::from_fn(|i| motions[(i + 1) % 3] * invert_rigid(&motions[i]));
+    }).collect();
+    let ground_truth = (0..3)
+        .map(|i| motions[(i + 1) % 3] * invert_rigid(&motions[i]))
+        .collect();
     SyntheticProblem {
         clouds,
         ground_truth,
@@ -114,7 +116,7 @@ mod tests {
         let b = three_views(3, 2000);
         assert_eq!(a.clouds, b.clouds);
         assert_eq!(a.clouds[0].len(), 2000);
-        let [t12, t23, t31] = a.ground_truth;
+        let [t12, t23, t31] = [a.ground_truth[0], a.ground_truth[1], a.ground_truth[2]];
         assert!((t31 * t23 * t12 - Transform::identity()).norm() < 1e-12);
         assert_ne!(three_views(4, 2000).clouds, a.clouds);
     }

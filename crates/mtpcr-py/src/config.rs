@@ -4,7 +4,7 @@
 use crate::convert::{json_from_py, json_to_py};
 use crate::errors::to_py;
 use mtpcr_core::Config;
-use pyo3::exceptions::{PyAttributeError, PyRuntimeError, PyTypeError, PyValueError};
+use pyo3::exceptions::{PyAttributeError, PyRuntimeError, PyTypeError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList, PyString, PyTuple};
 use serde_json::{Map, Value};
@@ -32,49 +32,25 @@ pub(crate) fn config_to_dict<'py>(
     Ok(crate::convert::json_text_to_py(py, &text)?.cast_into::<PyDict>()?)
 }
 
-/// `base` with the Python `settings` (field name -> value) applied, deserialized by the core's
-/// serde and validated. An unknown name is a `TypeError`; a value of the wrong type or out of
-/// range is a `ValueError`; both name the setting. `context` names the callable in messages.
+/// `base` with the Python `settings` (field name -> value) applied by the core's
+/// `Config::with_overrides` and validated. An unknown name is a `TypeError`; a value of the
+/// wrong type or out of range is a `ValueError`; both name the setting. `context` names the
+/// callable in messages.
 pub(crate) fn apply_settings(
     base: &Config,
     settings: &[(String, Bound<'_, PyAny>)],
     context: &str,
 ) -> PyResult<Config> {
-    let base_map = fields(base)?;
-    let mut given: Vec<(String, Value)> = Vec::with_capacity(settings.len());
+    let mut overrides = Map::new();
     for (key, value) in settings {
-        if !base_map.contains_key(key) {
-            let known: Vec<&str> = base_map.keys().map(String::as_str).collect();
-            return Err(PyTypeError::new_err(format!(
-                "{context}() got an unexpected keyword argument '{key}' (settings are: {})",
-                known.join(", ")
-            )));
-        }
-        given.push((key.clone(), json_from_py(key, value)?));
+        overrides.insert(key.clone(), json_from_py(key, value)?);
     }
-    let mut map = base_map.clone();
-    for (key, value) in &given {
-        map.insert(key.clone(), value.clone());
-    }
-    let config: Config = match serde_json::from_value(Value::Object(map)) {
-        Ok(config) => config,
-        Err(all) => {
-            // serde's message says what is wrong but not where: find the setting by trying
-            // each one alone over the base.
-            for (key, value) in &given {
-                let mut one = base_map.clone();
-                one.insert(key.clone(), value.clone());
-                if let Err(e) = serde_json::from_value::<Config>(Value::Object(one)) {
-                    return Err(PyValueError::new_err(format!(
-                        "invalid setting `{key}`: {e}"
-                    )));
-                }
-            }
-            return Err(PyValueError::new_err(format!("invalid settings: {all}")));
-        }
-    };
-    config.validate().map_err(to_py)?;
-    Ok(config)
+    base.with_overrides(&overrides).map_err(|e| match e {
+        mtpcr_core::Error::UnknownSetting { name, known } => PyTypeError::new_err(format!(
+            "{context}() got an unexpected keyword argument '{name}' (settings are: {known})"
+        )),
+        other => to_py(other),
+    })
 }
 
 /// `**kwargs` as (name, value) pairs.

@@ -79,7 +79,7 @@ pub(crate) fn points_from_py(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec
 pub(crate) fn cloud_from_py(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<PointCloud> {
     let cloud = PointCloud::new(points_from_py(obj, name)?);
     cloud
-        .validate(name, mtpcr_core::registration::MIN_POINTS)
+        .validate(name, mtpcr_core::MIN_POINTS)
         .map_err(crate::errors::to_py)?;
     Ok(cloud)
 }
@@ -134,14 +134,11 @@ pub(crate) fn transform_to_py<'py>(py: Python<'py>, t: &Transform) -> Bound<'py,
     PyArray2::from_owned_array(py, Array2::from_shape_fn((4, 4), |(i, j)| t[(i, j)]))
 }
 
-/// Three transforms as a 3x4x4 float64 array.
-pub(crate) fn transforms_to_py<'py>(
-    py: Python<'py>,
-    ts: &[Transform; 3],
-) -> Bound<'py, PyArray3<f64>> {
+/// Transforms as a Kx4x4 float64 array.
+pub(crate) fn transforms_to_py<'py>(py: Python<'py>, ts: &[Transform]) -> Bound<'py, PyArray3<f64>> {
     PyArray3::from_owned_array(
         py,
-        Array3::from_shape_fn((3, 4, 4), |(k, i, j)| ts[k][(i, j)]),
+        Array3::from_shape_fn((ts.len(), 4, 4), |(k, i, j)| ts[k][(i, j)]),
     )
 }
 

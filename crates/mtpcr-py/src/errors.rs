@@ -1,11 +1,12 @@
 //! The one mapping from the core's [`Error`] to Python exceptions.
 
 use mtpcr_core::Error;
-use pyo3::exceptions::{PyOSError, PyRuntimeError, PyValueError};
+use pyo3::exceptions::{PyOSError, PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::PyErr;
 
 /// `Io` -> `OSError` (with errno and file name, so a missing file is a `FileNotFoundError`);
-/// bad clouds, bad settings, bad arguments and malformed files -> `ValueError`; anything else
+/// bad clouds, bad settings, bad arguments and malformed files -> `ValueError`; an unknown
+/// setting -> `TypeError`; anything else
 /// (variants added later) -> `RuntimeError`.
 pub(crate) fn to_py(err: Error) -> PyErr {
     match &err {
@@ -29,6 +30,7 @@ pub(crate) fn to_py(err: Error) -> PyErr {
         | Error::InvalidConfig { .. }
         | Error::MalformedFile { .. }
         | Error::InvalidInput(_) => PyValueError::new_err(err.to_string()),
+        Error::UnknownSetting { .. } => PyTypeError::new_err(err.to_string()),
         _ => PyRuntimeError::new_err(err.to_string()),
     }
 }

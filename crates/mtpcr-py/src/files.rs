@@ -2,7 +2,8 @@
 
 use crate::convert::{colors_from_py, points_from_py, points_to_py, transforms_to_py};
 use crate::errors::to_py;
-use mtpcr_core::io::{self, Problem};
+use mtpcr_core::eval::problem::Problem;
+use mtpcr_core::io;
 use numpy::{PyArray2, PyArray3};
 use pyo3::prelude::*;
 use pyo3::types::PyTuple;
@@ -46,7 +47,8 @@ pub(crate) fn write_ply(
         .map_err(to_py)
 }
 
-/// Reads a problem file (``shared/problems/*.json``): three scans and their ground truth.
+/// Reads a problem file (``shared/problems/*.json``): two or more scans and their ground
+/// truth (poses rigid to 1e-3 are accepted and made exactly rigid; see ``Problem.notes``).
 ///
 /// Scan paths are resolved against ``data_root`` when given, else against the parent of the
 /// folder holding the problem file (the layout of ``shared/``). Raises ``OSError`` when the
@@ -64,11 +66,12 @@ pub(crate) fn load_problem(
     Ok(PyProblem { inner })
 }
 
-/// A three-view registration problem with ground truth, from :func:`load_problem`. Read-only.
+/// A registration problem with ground truth, from :func:`load_problem`. Read-only.
 ///
-/// ``poses`` are scan-to-world (``x_world = pose_i @ [x_i, 1]``); ``ground_truth`` is
-/// ``[T12, T23, T31]`` with ``T_ij = inv(pose_j) @ pose_i`` mapping scan i into scan j, the
-/// same convention as :class:`Registration`.
+/// ``poses`` are scan-to-world (``x_world = pose_i @ [x_i, 1]``); ``ground_truth`` holds the
+/// transform of each edge of the scans in file order (two scans: ``[T12]``; three or more, a
+/// loop: ``[T12, T23, ..., Tn1]``) with ``T_ij = inv(pose_j) @ pose_i`` mapping scan i into
+/// scan j, the same convention as :class:`Registration`.
 #[pyclass(frozen, name = "Problem", module = "mtpcr")]
 pub(crate) struct PyProblem {
     inner: Problem,
@@ -82,25 +85,31 @@ impl PyProblem {
         &self.inner.name
     }
 
-    /// The three scan files, resolved against the data root, as str.
+    /// The scan files, resolved against the data root, as str.
     #[getter]
     fn scans(&self) -> Vec<String> {
         self.inner.scans.iter().map(|p| path_text(p)).collect()
     }
 
-    /// Ground-truth scan-to-world poses, 3x4x4 float64.
+    /// Ground-truth scan-to-world poses, Nx4x4 float64.
     #[getter]
     fn poses<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray3<f64>> {
         transforms_to_py(py, &self.inner.poses)
     }
 
-    /// Ground truth ``[T12, T23, T31]``, 3x4x4 float64.
+    /// Ground truth of each edge (``[T12, T23, T31]`` for three scans), Kx4x4 float64.
     #[getter]
-    fn ground_truth<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray3<f64>> {
-        transforms_to_py(py, &self.inner.ground_truth())
+    fn ground_truth<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray3<f64>>> {
+        Ok(transforms_to_py(py, &self.inner.ground_truth().map_err(to_py)?))
     }
 
-    /// Reads the three scans: a tuple of three ``(N, 3)`` float64 arrays.
+    /// What loading changed (poses re-orthonormalised), one sentence each.
+    #[getter]
+    fn notes(&self) -> Vec<String> {
+        self.inner.notes.clone()
+    }
+
+    /// Reads the scans: a tuple of ``(N, 3)`` float64 arrays.
     fn read_scans<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyTuple>> {
         let clouds = py.detach(|| self.inner.read_scans()).map_err(to_py)?;
         PyTuple::new(py, clouds.iter().map(|c| points_to_py(py, c.points())))

@@ -27,8 +27,11 @@ use pyo3::types::PyTuple;
 fn _mtpcr(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let py = m.py();
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
-    m.add("TASK_NAMES", PyTuple::new(py, mtpcr_core::TASK_NAMES)?)?;
-    m.add("MIN_POINTS", mtpcr_core::registration::MIN_POINTS)?;
+    m.add(
+        "TASK_NAMES",
+        PyTuple::new(py, mtpcr_core::ViewGraph::ring(3).expect("3 views").task_names())?,
+    )?;
+    m.add("MIN_POINTS", mtpcr_core::MIN_POINTS)?;
     m.add_class::<config::PyConfig>()?;
     m.add_class::<run::PyRegistration>()?;
     m.add_class::<files::PyProblem>()?;

@@ -3,34 +3,42 @@
 use crate::config::{apply_settings, config_to_dict, kwargs_pairs, PyConfig};
 use crate::convert::{cloud_from_py, transform_to_py, transforms_to_py};
 use crate::errors::to_py;
-use mtpcr_core::{Config, Progress, Registration, TASK_NAMES};
+use mtpcr_core::{Config, Progress, Registration};
 use numpy::ndarray::Array2;
 use numpy::{PyArray2, PyArray3};
-use pyo3::exceptions::PyTypeError;
+use pyo3::exceptions::{PyAttributeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
 use std::ops::ControlFlow;
 
-/// `{task name: cost}` in the order of `TASK_NAMES`.
-fn costs_dict<'py>(py: Python<'py>, costs: &[f64; 6]) -> PyResult<Bound<'py, PyDict>> {
+/// `{task name: cost}` in slot order.
+fn costs_dict<'py>(py: Python<'py>, names: &[String], costs: &[f64]) -> PyResult<Bound<'py, PyDict>> {
     let dict = PyDict::new(py);
-    for (name, cost) in TASK_NAMES.iter().zip(costs) {
-        dict.set_item(*name, *cost)?;
+    for (name, cost) in names.iter().zip(costs) {
+        dict.set_item(name, *cost)?;
     }
     Ok(dict)
 }
 
 /// Calls the user's `on_generation(generation, best_costs)`; `Ok(false)` asks to stop.
-fn call_observer(py: Python<'_>, callback: &Py<PyAny>, progress: &Progress) -> PyResult<bool> {
-    let costs = costs_dict(py, &progress.best_costs)?;
+fn call_observer(
+    py: Python<'_>,
+    callback: &Py<PyAny>,
+    names: &[String],
+    progress: &Progress,
+) -> PyResult<bool> {
+    let costs = costs_dict(py, names, &progress.best_costs)?;
     let answer = callback.bind(py).call1((progress.generation, costs))?;
     Ok(answer.is_none() || answer.is_truthy()?)
 }
 
-/// Registers three overlapping point clouds that form a loop, with no initial guess.
+/// Registers overlapping point clouds with no initial guess: ``register(a, b)`` for two
+/// clouds, ``register(a, b, c, ...)`` (or ``register(*clouds)``) for three or more given in
+/// loop order (cloud k overlaps cloud k+1, the last closes the loop with the first).
 ///
-/// Returns a :class:`Registration` with ``T12``, ``T23``, ``T31``; ``T_ij`` maps points of
-/// cloud i into the frame of cloud j (``x_j = T_ij @ [x_i, 1]``), in the clouds' own frames.
+/// Returns a :class:`Registration`: one transform per edge (``T12``; or ``T12``, ``T23``,
+/// ..., ``Tn1``) and one pose per cloud. ``T_ij`` maps points of cloud i into the frame of
+/// cloud j (``x_j = T_ij @ [x_i, 1]``), in the clouds' own frames.
 ///
 /// Each cloud is anything numpy can view as an ``(N, 3)`` array of numbers (float32 or
 /// float64, C or Fortran order, nested lists); it needs at least ``MIN_POINTS`` finite points
@@ -42,22 +50,20 @@ fn call_observer(py: Python<'_>, callback: &Py<PyAny>, progress: &Progress) -> P
 ///
 /// ``on_generation(generation, best_costs)`` is called after every generation
 /// (``generation`` = 1, 2, ... up to ``generations``, or ``restarts * generations`` when
-/// restarting, counted across restarts; ``best_costs`` = dict from task name, see
-/// ``TASK_NAMES``, to the current run's best cost of that task). Returning ``False`` stops the run after
-/// that generation (the result then has ``completed=False``); returning ``None`` or ``True``
+/// restarting, counted across restarts; ``best_costs`` = dict from task name (``J1-a``,
+/// ``J2-a``, ..., ``J1-o``, ...: the aiding and original task of each edge) to the current
+/// evolution's best cost of that task). Returning ``False`` stops the run after that
+/// generation (the result then has ``completed=False``); returning ``None`` or ``True``
 /// continues. An exception raised by the callback stops the run and propagates, and so does
 /// Ctrl-C (``KeyboardInterrupt``, noticed after the current generation).
 ///
 /// The GIL is released while the engine runs. Bad clouds or settings raise ``ValueError``
 /// naming the argument or setting; an unknown keyword raises ``TypeError``.
 #[pyfunction]
-#[pyo3(signature = (cloud1, cloud2, cloud3, *, seed=None, on_generation=None, config=None, **settings))]
-#[allow(clippy::too_many_arguments)]
+#[pyo3(signature = (*clouds, seed=None, on_generation=None, config=None, **settings))]
 pub(crate) fn register(
     py: Python<'_>,
-    cloud1: &Bound<'_, PyAny>,
-    cloud2: &Bound<'_, PyAny>,
-    cloud3: &Bound<'_, PyAny>,
+    clouds: &Bound<'_, PyTuple>,
     seed: Option<&Bound<'_, PyAny>>,
     on_generation: Option<&Bound<'_, PyAny>>,
     config: Option<&Bound<'_, PyAny>>,
@@ -95,11 +101,21 @@ pub(crate) fn register(
         }
         _ => None,
     };
-    let clouds = [
-        cloud_from_py(cloud1, "cloud1")?,
-        cloud_from_py(cloud2, "cloud2")?,
-        cloud_from_py(cloud3, "cloud3")?,
-    ];
+    if clouds.len() < 2 {
+        return Err(PyTypeError::new_err(format!(
+            "register() needs at least two clouds, got {} (pass them as separate arguments: \
+             register(a, b) or register(*clouds))",
+            clouds.len()
+        )));
+    }
+    let clouds: Vec<_> = clouds
+        .iter()
+        .enumerate()
+        .map(|(i, c)| cloud_from_py(&c, &format!("cloud{}", i + 1)))
+        .collect::<PyResult<_>>()?;
+    let names = mtpcr_core::ViewGraph::for_views(clouds.len())
+        .map_err(to_py)?
+        .task_names();
 
     // The engine runs without the GIL; the observer takes it back once per generation to
     // check for Ctrl-C and to call the user's callback. A Python error stops the run and is
@@ -109,7 +125,7 @@ pub(crate) fn register(
         let mut observer = |progress: &Progress| -> ControlFlow<()> {
             Python::attach(|py| {
                 let verdict = py.check_signals().and_then(|()| match &callback {
-                    Some(f) => call_observer(py, f, progress),
+                    Some(f) => call_observer(py, f, &names, progress),
                     None => Ok(true),
                 });
                 match verdict {
@@ -139,10 +155,12 @@ pub(crate) fn register(
 
 /// The result of :func:`register`. Read-only.
 ///
-/// ``T_ij`` maps points of cloud i into the frame of cloud j: ``x_j = T_ij @ [x_i, 1]``.
-/// ``poses`` put every cloud into cloud 1's frame (ready to merge). Costs are named by
-/// ``TASK_NAMES``: ``J1-a``..``J3-a`` are the aiding tasks, ``J1-o``..``J3-o`` the original
-/// tasks (pair 1->2, 2->3, 3->1); lower is better.
+/// ``T_ij`` maps points of cloud i into the frame of cloud j: ``x_j = T_ij @ [x_i, 1]``. Each
+/// edge's transform is an attribute named so (``T12``; for three clouds ``T12``, ``T23``,
+/// ``T31``); ``transforms`` stacks them in edge order, ``edges`` describes them, and
+/// ``poses`` put every cloud into cloud 1's frame (ready to merge). Costs are named by task:
+/// ``J1-a``, ``J2-a``, ... are the aiding tasks, ``J1-o``, ``J2-o``, ... the original tasks
+/// of edge 1, 2, ...; lower is better; they are the evolution's, before the refinement.
 #[pyclass(frozen, name = "Registration", module = "mtpcr")]
 pub(crate) struct PyRegistration {
     inner: Registration,
@@ -151,69 +169,118 @@ pub(crate) struct PyRegistration {
 
 #[pymethods]
 impl PyRegistration {
-    /// 4x4 float64 array mapping cloud 1 into cloud 2's frame.
-    #[getter(T12)]
-    fn t12<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        transform_to_py(py, &self.inner.transforms[0])
+    /// The transform of edge ``name`` (``T12``, ``T23``, ...), a 4x4 float64 array.
+    fn __getattr__<'py>(
+        &self,
+        py: Python<'py>,
+        name: &str,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        (0..self.inner.edges.len())
+            .find(|&k| self.inner.edge_name(k) == name)
+            .map(|k| transform_to_py(py, &self.inner.edges[k].t_target_source))
+            .ok_or_else(|| {
+                let names: Vec<String> = (0..self.inner.edges.len())
+                    .map(|k| self.inner.edge_name(k))
+                    .collect();
+                PyAttributeError::new_err(format!(
+                    "'Registration' object has no attribute '{name}' (its transforms are {})",
+                    names.join(", ")
+                ))
+            })
     }
 
-    /// 4x4 float64 array mapping cloud 2 into cloud 3's frame.
-    #[getter(T23)]
-    fn t23<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        transform_to_py(py, &self.inner.transforms[1])
-    }
-
-    /// 4x4 float64 array mapping cloud 3 into cloud 1's frame.
-    #[getter(T31)]
-    fn t31<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        transform_to_py(py, &self.inner.transforms[2])
-    }
-
-    /// ``[T12, T23, T31]`` as a 3x4x4 float64 array.
+    /// The edge transforms in edge order (``[T12, T23, T31]`` for three clouds), Kx4x4.
     #[getter]
     fn transforms<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray3<f64>> {
-        transforms_to_py(py, &self.inner.transforms)
+        transforms_to_py(py, &self.inner.transforms())
     }
 
-    /// Each cloud's transform into cloud 1's frame, ``[I, inv(T12), T31]``, as 3x4x4.
+    /// One dict per edge: ``name`` (``"T12"``), ``source`` and ``target`` (clouds numbered
+    /// from 0), ``t_target_source`` (4x4), and the evolution's ``original_cost`` and
+    /// ``aiding_cost``.
+    #[getter]
+    fn edges<'py>(&self, py: Python<'py>) -> PyResult<Vec<Bound<'py, PyDict>>> {
+        self.inner
+            .edges
+            .iter()
+            .enumerate()
+            .map(|(k, e)| {
+                let d = PyDict::new(py);
+                d.set_item("name", self.inner.edge_name(k))?;
+                d.set_item("source", e.source)?;
+                d.set_item("target", e.target)?;
+                d.set_item("t_target_source", transform_to_py(py, &e.t_target_source))?;
+                d.set_item("original_cost", e.original_cost)?;
+                d.set_item("aiding_cost", e.aiding_cost)?;
+                Ok(d)
+            })
+            .collect()
+    }
+
+    /// The 4x4 transform mapping cloud ``source`` into cloud ``target``'s frame (clouds
+    /// numbered from 0): the edge's own estimate, its inverse, or composed from the poses.
+    fn t_target_source<'py>(
+        &self,
+        py: Python<'py>,
+        target: usize,
+        source: usize,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let n = self.inner.poses.len();
+        if target >= n || source >= n {
+            return Err(PyValueError::new_err(format!(
+                "clouds are numbered 0..{n}, got target {target} and source {source}"
+            )));
+        }
+        Ok(transform_to_py(
+            py,
+            &self.inner.t_target_source(target, source),
+        ))
+    }
+
+    /// Each cloud's transform into cloud 1's frame (``poses[0]`` is the identity), Nx4x4.
     #[getter]
     fn poses<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray3<f64>> {
-        transforms_to_py(py, &self.inner.poses())
+        transforms_to_py(py, &self.inner.poses)
     }
 
-    /// ``||T31 @ T23 @ T12 - I||_F``: how far the three transforms are from closing the loop.
+    /// ``||T_n1 ... T23 @ T12 - I||_F`` for three or more clouds in a loop (how far the
+    /// transforms are from closing it; ~0 after refinement); ``None`` for two clouds.
     #[getter]
-    fn loop_residual(&self) -> f64 {
+    fn loop_residual(&self) -> Option<f64> {
         self.inner.loop_residual()
     }
 
-    /// Best final cost of each task: dict from task name (``TASK_NAMES``) to float.
+    /// The evolution's final best cost of each task (before refinement): dict from task name
+    /// (``task_names``) to float.
     #[getter]
     fn best_costs<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        costs_dict(py, &self.costs())
+        costs_dict(py, &self.inner.task_names, &self.inner.best_costs())
     }
 
-    /// Best cost of each task after the initial population (row 0) and after every
-    /// generation: float64 array ``(generations_run + 1, 6)``, columns in ``TASK_NAMES`` order.
+    /// Best cost of each task of the kept evolution (the restart with the lowest final
+    /// original costs) after its initial population (row 0) and after every generation:
+    /// float64 array ``(generations + 1, tasks)``, columns in ``task_names`` order.
     #[getter]
     fn history<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
         let h = &self.inner.history;
-        PyArray2::from_owned_array(py, Array2::from_shape_fn((h.len(), 6), |(i, k)| h[i][k]))
+        let cols = h.first().map_or(0, Vec::len);
+        PyArray2::from_owned_array(py, Array2::from_shape_fn((h.len(), cols), |(i, k)| h[i][k]))
     }
 
-    /// The six task names, the keys of ``best_costs`` and the columns of ``history``.
+    /// The task names, the keys of ``best_costs`` and the columns of ``history``.
     #[getter]
     fn task_names<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyTuple>> {
-        PyTuple::new(py, TASK_NAMES)
+        PyTuple::new(py, &self.inner.task_names)
     }
 
-    /// Loss evaluations made.
+    /// Loss evaluations made (all restarts).
     #[getter]
     fn evaluations(&self) -> usize {
         self.inner.evaluations
     }
 
-    /// Generations run (fewer than configured when the run was stopped).
+    /// Generations run, all restarts together (fewer than ``restarts * generations`` when the
+    /// run was stopped).
     #[getter]
     fn generations_run(&self) -> usize {
         self.inner.generations_run
@@ -257,36 +324,26 @@ impl PyRegistration {
 
     fn __repr__(&self) -> String {
         let r = &self.inner;
-        let costs: Vec<String> = TASK_NAMES
+        let costs: Vec<String> = r
+            .task_names
             .iter()
-            .zip(self.costs())
+            .zip(r.best_costs())
             .map(|(name, cost)| format!("'{name}': {cost:.4}"))
             .collect();
+        let residual = r
+            .loop_residual()
+            .map_or("None".to_string(), |v| format!("{v:.3e}"));
         format!(
-            "Registration(completed={}, generations_run={}/{}, seed={}, loop_residual={:.3e}, \
-             seconds={:.2}, best_costs={{{}}})",
+            "Registration(clouds={}, completed={}, generations_run={} ({} restarts x {}), \
+             seed={}, loop_residual={residual}, seconds={:.2}, best_costs={{{}}})",
+            r.poses.len(),
             if r.completed { "True" } else { "False" },
             r.generations_run,
+            self.config.restarts,
             self.config.generations,
             r.seed,
-            r.loop_residual(),
             r.seconds,
             costs.join(", "),
         )
-    }
-}
-
-impl PyRegistration {
-    /// Best final costs in the order of `TASK_NAMES` (aiding tasks, then original tasks).
-    fn costs(&self) -> [f64; 6] {
-        let b = &self.inner.best_costs;
-        [
-            b.aiding[0],
-            b.aiding[1],
-            b.aiding[2],
-            b.original[0],
-            b.original[1],
-            b.original[2],
-        ]
     }
 }

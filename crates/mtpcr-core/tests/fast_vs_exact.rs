@@ -3,15 +3,21 @@
 
 mod common;
 
-use mtpcr_core::fitness::{CappedDistanceLoss, InlierLoss, Loss, SearchMethod};
+use mtpcr_core::loss::{CappedDistanceLoss, InlierLoss, Loss};
 use mtpcr_core::se3::{random_rigid, Rigid};
-use mtpcr_core::{synthetic, Config, PointCloud, PreparedProblem};
+use mtpcr_core::{synthetic, Config, PointCloud, PreparedProblem, SearchMethod};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-fn check(clouds: &[PointCloud; 3], trials: usize, seed: u64) {
+fn check(clouds: &[PointCloud], trials: usize, seed: u64) {
     let prepared = PreparedProblem::new(clouds, &Config::default()).unwrap();
-    let c = prepared.clouds();
+    let exact_config = Config {
+        search: SearchMethod::Exact,
+        ..Config::default()
+    };
+    let exact_prepared = PreparedProblem::new(clouds, &exact_config).unwrap();
+    let (c, e) = (prepared.clouds(), exact_prepared.clouds());
+    assert_eq!(c[0].points(), e[0].points(), "the same prepared points");
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut with_inliers = 0;
     for trial in 0..trials {
@@ -35,11 +41,10 @@ fn check(clouds: &[PointCloud; 3], trials: usize, seed: u64) {
         let fast = InlierLoss {
             source: &c[s],
             target: &c[t],
-            method: SearchMethod::Fast,
         };
         let exact = InlierLoss {
-            method: SearchMethod::Exact,
-            ..fast
+            source: &e[s],
+            target: &e[t],
         };
         let (n1, n2) = fast.inlier_counts(&r);
         assert_eq!((n1, n2), exact.inlier_counts(&r), "trial {trial}");
@@ -48,14 +53,14 @@ fn check(clouds: &[PointCloud; 3], trials: usize, seed: u64) {
         let fa = CappedDistanceLoss {
             source: &c[s],
             target: &c[t],
-            method: SearchMethod::Fast,
             two_way: false,
         };
         let ex = CappedDistanceLoss {
-            method: SearchMethod::Exact,
-            ..fa
+            source: &e[s],
+            target: &e[t],
+            two_way: false,
         };
-        let bound = c[t].field_error_bound();
+        let bound = c[t].distances().error_bound();
         let d = (fa.evaluate(&r) - ex.evaluate(&r)).abs();
         assert!(
             d <= bound,
@@ -76,11 +81,10 @@ fn identical_inlier_counts_on_bunny_size_synthetic_clouds() {
 }
 
 #[test]
+#[cfg_attr(not(shared_data), ignore = "needs ../shared (or MTPCR_SHARED_DIR), not found at build time")]
 fn identical_inlier_counts_on_real_scans() {
-    let Some(shared) = common::shared_dir() else {
-        return;
-    };
+    let shared = common::shared_dir();
     let problem =
-        mtpcr_core::io::Problem::load(shared.join("problems/bunny-a.json"), None).unwrap();
+        mtpcr_core::eval::problem::Problem::load(shared.join("problems/bunny-a.json"), None).unwrap();
     check(&problem.read_scans().unwrap(), 150, 2);
 }

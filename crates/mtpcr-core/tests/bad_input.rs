@@ -3,7 +3,7 @@
 use mtpcr_core::io::read_ply;
 use mtpcr_core::{register, synthetic, Config, Error, PointCloud};
 
-fn clouds() -> [PointCloud; 3] {
+fn clouds() -> Vec<PointCloud> {
     synthetic::three_views(31, 2000).clouds
 }
 

@@ -1,10 +1,11 @@
 //! The baselines of the paper's Table 4: MFEA (Gupta et al. 2016) and G-MFEA (Ding et al.
 //! 2019), over the same six task losses as MTPCR (DESIGN.md, "Baselines").
 //!
-//! One population of `6n` members lives in the unified space `[0, 1]^6`, decoded into the
-//! search box (angles in [-180, 180] degrees, translations in [-shift, shift]) only to be
-//! scored. Each member has a skill factor (the task slot 0..6 it is evaluated on) and a
-//! factorial cost per task (infinity where it was not evaluated).
+//! One population of `Kn` members (`K` tasks: two per edge of the view graph, six for the
+//! three-view loop; the numbers below are for `K = 6`) lives in the unified space `[0, 1]^6`,
+//! decoded into the search box (angles in [-180, 180] degrees, translations in
+//! [-shift, shift]) only to be scored. Each member has a skill factor (the task slot 0..K it is
+//! evaluated on) and a factorial cost per task (infinity where it was not evaluated).
 //!
 //! The choices the sources leave open:
 //! - **Initial population**: `6n` uniform members, each evaluated on **all six** tasks (standard
@@ -45,10 +46,9 @@
 //! Children are not pruned (no early exit): whether a child survives depends on the ranks of
 //! the whole pool, so no cost limit is known in advance.
 
-use crate::evolve::{
-    end_of_generation, loop_term, sbx_beta, sbx_children, sbx_eta, score_all, Outcome, Tasks,
-};
-use crate::registration::{Config, Progress};
+use super::{end_of_generation, sbx_beta, sbx_children, sbx_eta, score_all, Outcome, Progress, Tasks};
+use crate::config::Config;
+use crate::se3::DOF;
 use crate::se3::{decode, Individual, Transform};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -66,16 +66,16 @@ const TRANSLATION_INTERVAL: usize = 5;
 const TRANSLATION_TOP: f64 = 0.4;
 
 /// A point of the unified space `[0, 1]^6`.
-type Unit = [f64; 6];
+type Unit = [f64; DOF];
 
 /// One member of the single population.
 #[derive(Clone, Debug)]
 struct Member {
     u: Unit,
-    /// Factorial costs (local part plus loop term); infinity where not evaluated.
-    cost: [f64; 6],
+    /// Factorial costs by task slot (local part plus loop term); infinity where not evaluated.
+    cost: Vec<f64>,
     /// Costs without the loop term (equal to `cost` for aiding tasks).
-    local: [f64; 6],
+    local: Vec<f64>,
     /// The task slot the member is evaluated on (its best rank).
     skill: usize,
 }
@@ -90,9 +90,10 @@ impl Member {
 /// one's skill factor to the task of its best rank (ties: lowest slot).
 fn select(mut pool: Vec<Member>, keep: usize) -> Vec<Member> {
     let m = pool.len();
+    let tasks = pool.first().map_or(0, |member| member.cost.len());
     let mut best_rank = vec![usize::MAX; m];
     let mut best_task = vec![usize::MAX; m];
-    for s in 0..6 {
+    for s in 0..tasks {
         let mut order: Vec<usize> = (0..m).filter(|&i| pool[i].evaluated_on(s)).collect();
         order.sort_by(|&a, &b| pool[a].cost[s].total_cmp(&pool[b].cost[s]));
         for (r, &i) in order.iter().enumerate() {
@@ -103,7 +104,7 @@ fn select(mut pool: Vec<Member>, keep: usize) -> Vec<Member> {
         }
     }
     for (member, &s) in pool.iter_mut().zip(&best_task) {
-        if s < 6 {
+        if s < tasks {
             member.skill = s;
         }
     }
@@ -128,12 +129,19 @@ fn best_of(pop: &[Member], s: usize) -> usize {
 /// G-MFEA's translation of each task at generation `g` of `generations`:
 /// `(g / G)^2 (0.5 - m_k)`, `m_k` the mean of the best 40% (at least one) of the members with
 /// skill factor `k`; zero for a task without members.
-fn translations(pop: &[Member], g: usize, generations: usize) -> [Unit; 6] {
+fn translations(pop: &[Member], tasks: usize, g: usize, generations: usize) -> Vec<Unit> {
     let scale = (g as f64 / generations as f64).powi(2);
-    std::array::from_fn(|k| {
+    (0..tasks)
+        .map(|k| translation_of(pop, k, scale))
+        .collect()
+}
+
+/// One task's G-MFEA translation (see [`translations`]).
+fn translation_of(pop: &[Member], k: usize, scale: f64) -> Unit {
+    {
         let mut of_k: Vec<&Member> = pop.iter().filter(|m| m.skill == k).collect();
         if of_k.is_empty() {
-            return [0.0; 6];
+            return [0.0; DOF];
         }
         of_k.sort_by(|a, b| a.cost[k].total_cmp(&b.cost[k]));
         let top = ((TRANSLATION_TOP * of_k.len() as f64).ceil() as usize).clamp(1, of_k.len());
@@ -141,17 +149,17 @@ fn translations(pop: &[Member], g: usize, generations: usize) -> [Unit; 6] {
             let mean = of_k[..top].iter().map(|m| m.u[d]).sum::<f64>() / top as f64;
             scale * (0.5 - mean)
         })
-    })
+    }
 }
 
 /// Polynomial mutation in `[0, 1]`: each variable with probability 1/6, and variable
 /// `forced` (drawn first) always.
 fn mutate(u: &Unit, rng: &mut ChaCha8Rng) -> Unit {
-    let forced = rng.random_range(0..6);
+    let forced = rng.random_range(0..DOF);
     let e = 1.0 / (MUTATION_INDEX + 1.0);
     let mut x = *u;
     for (d, v) in x.iter_mut().enumerate() {
-        let hit = rng.random::<f64>() < 1.0 / 6.0;
+        let hit = rng.random::<f64>() < 1.0 / DOF as f64;
         if hit || d == forced {
             let r = rng.random::<f64>();
             *v = if r <= 0.5 {
@@ -191,7 +199,7 @@ fn crossover(
     a: &Member,
     b: &Member,
     eta: f64,
-    shifts: Option<&[Unit; 6]>,
+    shifts: Option<&[Unit]>,
     rng: &mut ChaCha8Rng,
 ) -> [(Unit, usize); 2] {
     let shifts = shifts.filter(|_| a.skill != b.skill);
@@ -199,8 +207,8 @@ fn crossover(
         Some(d) => (add(&a.u, &d[a.skill]), add(&b.u, &d[b.skill])),
         None => (a.u, b.u),
     };
-    let mut c = [[0.0; 6]; 2];
-    for d in 0..6 {
+    let mut c = [[0.0; DOF]; 2];
+    for d in 0..DOF {
         let beta = sbx_beta(rng.random::<f64>(), eta);
         (c[0][d], c[1][d]) = sbx_children(xa[d], xb[d], beta);
     }
@@ -210,7 +218,7 @@ fn crossover(
         } else {
             b.skill
         };
-        let back = shifts.map_or([0.0; 6], |d| d[s]);
+        let back = shifts.map_or([0.0; DOF], |d| d[s]);
         (sub_clipped(&child, &back), s)
     })
 }
@@ -220,7 +228,7 @@ fn crossover(
 fn offspring(
     pop: &[Member],
     eta: f64,
-    shifts: Option<&[Unit; 6]>,
+    shifts: Option<&[Unit]>,
     rng: &mut ChaCha8Rng,
 ) -> Vec<(Unit, usize)> {
     let size = pop.len();
@@ -253,11 +261,12 @@ pub(crate) fn run_mfea(
     observer: &mut dyn FnMut(&Progress) -> ControlFlow<()>,
     generalized: bool,
 ) -> Outcome {
-    let size = 6 * config.population_size;
+    let slots = tasks.count();
+    let edges = slots / 2;
+    let size = slots * config.population_size;
     let generations = config.generations;
-    let unit_free = config.unit_free_loop_term.then_some(tasks.shift);
     let sbox = tasks.search_box;
-    let no_limits = [f64::INFINITY; 6];
+    let no_limits = vec![f64::INFINITY; slots];
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
 
     // Initialisation: every member on every task, no loop term.
@@ -268,39 +277,40 @@ pub(crate) fn run_mfea(
         .iter()
         .flat_map(|u| {
             let x = sbox.decode_unit(u);
-            (0..6).map(move |s| (s, x))
+            (0..slots).map(move |s| (s, x))
         })
         .collect();
     let scores = score_all(tasks, config, pool, &jobs, None, &no_limits);
     let mut evaluations = jobs.len();
     let members: Vec<Member> = init
         .into_iter()
-        .zip(scores.chunks(6))
+        .zip(scores.chunks(slots))
         .map(|(u, sc)| Member {
             u,
-            cost: std::array::from_fn(|s| sc[s].0),
-            local: std::array::from_fn(|s| sc[s].1),
+            cost: sc.iter().map(|v| v.0).collect(),
+            local: sc.iter().map(|v| v.1).collect(),
             skill: 0,
         })
         .collect();
     let mut pop = select(members, size);
-    let best_costs =
-        |pop: &[Member]| -> [f64; 6] { std::array::from_fn(|s| pop[best_of(pop, s)].cost[s]) };
+    let best_costs = |pop: &[Member]| -> Vec<f64> {
+        (0..slots).map(|s| pop[best_of(pop, s)].cost[s]).collect()
+    };
     let mut history = vec![best_costs(&pop)];
 
-    let mut shifts = [[0.0; 6]; 6];
+    let mut shifts = vec![[0.0; DOF]; slots];
     let mut generations_run = 0;
     let mut completed = true;
     for g in 0..generations {
-        let bests: [Transform; 3] =
-            std::array::from_fn(|j| decode(&sbox.decode_unit(&pop[best_of(&pop, 3 + j)].u)));
+        let bests: Vec<Transform> = (0..edges)
+            .map(|j| decode(&sbox.decode_unit(&pop[best_of(&pop, edges + j)].u)))
+            .collect();
         if config.refresh_loop_term {
             for m in pop.iter_mut() {
                 let t = decode(&sbox.decode_unit(&m.u));
-                for j in 0..3 {
-                    if m.evaluated_on(3 + j) {
-                        m.cost[3 + j] =
-                            m.local[3 + j] + loop_term(j, &t, &bests, config.alpha, unit_free);
+                for j in 0..edges {
+                    if m.evaluated_on(edges + j) {
+                        m.cost[edges + j] = m.local[edges + j] + tasks.loop_term(j, &t, &bests, config);
                     }
                 }
             }
@@ -309,12 +319,12 @@ pub(crate) fn run_mfea(
             && g >= TRANSLATION_START
             && (g - TRANSLATION_START) % TRANSLATION_INTERVAL == 0
         {
-            shifts = translations(&pop, g, generations);
+            shifts = translations(&pop, slots, g, generations);
         }
         let children = offspring(
             &pop,
             sbx_eta(config, g),
-            generalized.then_some(&shifts),
+            generalized.then_some(&shifts[..]),
             &mut rng,
         );
 
@@ -326,8 +336,8 @@ pub(crate) fn run_mfea(
         evaluations += jobs.len();
         let mut merged = pop;
         merged.extend(children.into_iter().zip(scores).map(|((u, s), sc)| {
-            let mut cost = [f64::INFINITY; 6];
-            let mut local = [f64::INFINITY; 6];
+            let mut cost = vec![f64::INFINITY; slots];
+            let mut local = vec![f64::INFINITY; slots];
             (cost[s], local[s]) = sc;
             Member {
                 u,
@@ -346,7 +356,7 @@ pub(crate) fn run_mfea(
     }
 
     Outcome {
-        best: std::array::from_fn(|s| sbox.decode_unit(&pop[best_of(&pop, s)].u)),
+        best: (0..slots).map(|s| sbox.decode_unit(&pop[best_of(&pop, s)].u)).collect(),
         best_costs: best_costs(&pop),
         history,
         evaluations,
@@ -362,8 +372,8 @@ mod tests {
     fn member(u: f64, cost: [f64; 6], skill: usize) -> Member {
         Member {
             u: [u; 6],
-            cost,
-            local: cost,
+            cost: cost.to_vec(),
+            local: cost.to_vec(),
             skill,
         }
     }
@@ -401,7 +411,7 @@ mod tests {
         let mut c = [INF; 6];
         c[4] = 0.3;
         pop.push(member(0.9, c, 4));
-        let d = translations(&pop, 30, 60);
+        let d = translations(&pop, 6, 30, 60);
         for k in 0..6 {
             assert!((d[0][k] - 0.25 * (0.5 - 0.15)).abs() < 1e-12, "{:?}", d[0]);
             assert!((d[4][k] - 0.25 * (0.5 - 0.9)).abs() < 1e-12);
@@ -418,7 +428,7 @@ mod tests {
     fn cross_task_crossover_shifts_the_parents_and_shifts_each_child_back() {
         let a = member(0.2, [1.0, INF, INF, INF, INF, INF], 0);
         let b = member(0.6, [INF, 1.0, INF, INF, INF, INF], 1);
-        let mut shifts = [[0.0; 6]; 6];
+        let mut shifts = vec![[0.0; DOF]; 6];
         shifts[0] = [0.05; 6];
         shifts[1] = [-0.15; 6];
         let eta = 2.0;
@@ -427,7 +437,7 @@ mod tests {
                 &a,
                 &b,
                 eta,
-                Some(&shifts),
+                Some(&shifts[..]),
                 &mut ChaCha8Rng::seed_from_u64(seed),
             );
             // The same draws by hand: six betas, then the two imitations; the parents
@@ -450,7 +460,7 @@ mod tests {
                 &a,
                 &b,
                 eta,
-                Some(&zero),
+                Some(&zero[..]),
                 &mut ChaCha8Rng::seed_from_u64(seed),
             );
             assert_eq!(same, plain, "zero translations change nothing");
@@ -460,7 +470,7 @@ mod tests {
                 &a,
                 &a2,
                 eta,
-                Some(&shifts),
+                Some(&shifts[..]),
                 &mut ChaCha8Rng::seed_from_u64(seed),
             );
             let p = crossover(&a, &a2, eta, None, &mut ChaCha8Rng::seed_from_u64(seed));

@@ -30,8 +30,8 @@ fn one_and_two_threads_give_identical_results() {
             None,
         )
         .unwrap();
-        assert_eq!(one.transforms, two.transforms);
-        assert_eq!(one.best_costs, two.best_costs);
+        assert_eq!(one.transforms(), two.transforms());
+        assert_eq!(one.best_costs(), two.best_costs());
         assert_eq!(one.history, two.history);
         assert_eq!(one.evaluations, two.evaluations);
     }
@@ -72,7 +72,7 @@ fn another_seed_gives_another_run_and_a_prepared_problem_is_reusable() {
             None,
         )
         .unwrap();
-    assert_eq!(a.transforms, a2.transforms);
+    assert_eq!(a.transforms(), a2.transforms());
     assert_ne!(a.history, b.history);
     let other = Config {
         sample_ratio: 0.1,
@@ -103,7 +103,7 @@ fn no_seed_draws_one_and_reports_it() {
     )
     .unwrap();
     assert_eq!(
-        r.transforms, again.transforms,
+        r.transforms(), again.transforms(),
         "the reported seed reproduces the run"
     );
 }

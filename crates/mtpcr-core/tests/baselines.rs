@@ -1,12 +1,8 @@
 //! The MFEA and G-MFEA baselines on seeded synthetic problems: they run through the same entry
 //! as MTPCR, count their evaluations (`36n + 12n G`), are reproducible on any number of
 //! threads and can be stopped. They are not required to register well (they are the paper's
-//! weaker baselines); `baselines_beside_mtpcr` prints how they compare.
+//! weaker baselines); `mtpcr experiment quality` compares them with MTPCR.
 
-mod common;
-
-use mtpcr_core::eval::{run_moved, score};
-use mtpcr_core::io::Problem;
 use mtpcr_core::{register, synthetic, Config, Method, Progress};
 use std::ops::ControlFlow;
 
@@ -47,8 +43,8 @@ fn baselines_run_count_their_evaluations_and_never_lose_their_best() {
                 .collect::<Vec<_>>()
         );
         let last = r.history.last().unwrap();
-        assert_eq!(&last[..3], &r.best_costs.aiding[..]);
-        assert_eq!(&last[3..], &r.best_costs.original[..]);
+        assert_eq!(&last[..3], &r.best_costs()[..3][..]);
+        assert_eq!(&last[3..], &r.best_costs()[3..][..]);
         // Elitist selection keeps every task's best; without refresh_loop_term no stored cost
         // changes, so no best cost gets worse.
         for w in r.history.windows(2) {
@@ -58,7 +54,7 @@ fn baselines_run_count_their_evaluations_and_never_lose_their_best() {
             r.history[0][0] > last[0],
             "{method:?} improves the aiding tasks"
         );
-        for t in &r.transforms {
+        for t in &r.transforms() {
             let rot = t.fixed_view::<3, 3>(0, 0);
             let id = mtpcr_core::Transform::identity();
             assert!((rot.transpose() * rot - id.fixed_view::<3, 3>(0, 0)).norm() < 1e-9);
@@ -90,8 +86,8 @@ fn baselines_are_bit_identical_on_one_and_two_threads() {
                 .unwrap()
             };
             let (one, two) = (run(1), run(2));
-            assert_eq!(one.transforms, two.transforms, "{method:?}");
-            assert_eq!(one.best_costs, two.best_costs);
+            assert_eq!(one.transforms(), two.transforms(), "{method:?}");
+            assert_eq!(one.best_costs(), two.best_costs());
             assert_eq!(one.history, two.history);
             assert_eq!(one.evaluations, two.evaluations);
         }
@@ -106,7 +102,7 @@ fn gmfea_equals_mfea_until_its_first_translation_and_differs_after() {
     // Generations 0..10 draw the same numbers and translate by zero: rows 0..=10 agree.
     assert_eq!(mfea.history[..=10], gmfea.history[..=10]);
     assert!(
-        mfea.history[11..] != gmfea.history[11..] || mfea.transforms != gmfea.transforms,
+        mfea.history[11..] != gmfea.history[11..] || mfea.transforms() != gmfea.transforms(),
         "the translation from generation 10 on changes the run"
     );
     let mtpcr = register(&problem.clouds, &config(Method::Mtpcr, 5), None).unwrap();
@@ -145,69 +141,4 @@ fn baseline_restarts_add_their_evaluations() {
     let r = register(&problem.clouds, &c, None).unwrap();
     assert_eq!(r.evaluations, 2 * expected_evaluations(&c, 3));
     assert_eq!(r.generations_run, 6);
-}
-
-/// One line of the comparisons below.
-fn report(method: Method, seed: u64, r: &mtpcr_core::Registration, rot_deg: &[f64; 3]) {
-    println!(
-        "{method:?} seed {seed}: original {:.4?} (sum {:.4}), aiding {:.4?}, rot deg {:.2?}, {} evals, {:.1} s",
-        r.best_costs.original,
-        r.best_costs.original.iter().sum::<f64>(),
-        r.best_costs.aiding,
-        rot_deg,
-        r.evaluations,
-        r.seconds
-    );
-}
-
-/// Paper settings (`Config::paper()`, as the paper compares them), one synthetic problem,
-/// three seeds: final original costs and rotation errors of the three methods (printed; run
-/// with `--ignored --nocapture`; the synthetic problem's seed from `MTPCR_COMPARE_PROBLEM`,
-/// default 1).
-#[test]
-#[ignore = "slow comparison; prints a table"]
-fn baselines_beside_mtpcr() {
-    let which = std::env::var("MTPCR_COMPARE_PROBLEM")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(1);
-    let problem = synthetic::three_views(which, 12_000);
-    for method in [Method::Mtpcr, Method::Mfea, Method::Gmfea] {
-        for seed in 1..=3 {
-            let c = Config {
-                method,
-                seed: Some(seed),
-                ..Config::paper()
-            };
-            let r = register(&problem.clouds, &c, None).unwrap();
-            report(
-                method,
-                seed,
-                &r,
-                &score(&r.transforms, &problem.ground_truth).rot_deg,
-            );
-        }
-    }
-}
-
-/// The same on the real problem bunny-a (`../shared`; skipped when absent), with the moved
-/// clouds of `mtpcr eval` (run r uses seed r).
-#[test]
-#[ignore = "slow comparison on real scans; prints a table"]
-fn baselines_beside_mtpcr_on_bunny_a() {
-    let Some(shared) = common::shared_dir() else {
-        return;
-    };
-    let problem = Problem::load(shared.join("problems/bunny-a.json"), None).unwrap();
-    let clouds = problem.read_scans().unwrap();
-    for method in [Method::Mtpcr, Method::Mfea, Method::Gmfea] {
-        for seed in 0..3 {
-            let c = Config {
-                method,
-                ..Config::paper()
-            };
-            let (r, s) = run_moved(&clouds, &problem.ground_truth(), &c, seed).unwrap();
-            report(method, seed, &r, &s.rot_deg);
-        }
-    }
 }

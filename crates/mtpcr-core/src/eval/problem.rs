@@ -1,0 +1,159 @@
+//! Registration problems with ground truth, as in `shared/problems/*.json`: a name, two or
+//! more scan files and each scan's ground-truth scan-to-world pose.
+
+use crate::cloud::PointCloud;
+use crate::error::{Error, Result};
+use crate::graph::ViewGraph;
+use crate::io::read_ply;
+use crate::se3::{is_rigid, nearest_rigid, Transform};
+use std::path::{Path, PathBuf};
+
+/// A pose is accepted when it is rigid to this tolerance (data sets print poses with a few
+/// digits: a 3DMatch pose is orthonormal to ~1e-4); beyond [`EXACT_TOLERANCE`] it is
+/// replaced by the nearest rigid transform, with a note.
+pub const POSE_TOLERANCE: f64 = 1e-3;
+/// Poses rigid to this tolerance are used exactly as written.
+pub const EXACT_TOLERANCE: f64 = 1e-6;
+
+/// A registration problem with ground truth.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Problem {
+    /// Short name (`bunny-a`).
+    pub name: String,
+    /// The scans, resolved against the data root.
+    pub scans: Vec<PathBuf>,
+    /// Ground-truth scan-to-world poses: `x_world = pose_i x_i`.
+    pub poses: Vec<Transform>,
+    /// What loading changed (poses re-orthonormalised), one sentence each.
+    pub notes: Vec<String>,
+}
+
+#[derive(serde::Deserialize)]
+struct ProblemFile {
+    name: String,
+    scans: Vec<String>,
+    poses: Vec<[[f64; 4]; 4]>,
+}
+
+impl Problem {
+    /// Reads a problem file. Scan paths are resolved against `data_root` when given, else
+    /// against the parent of the folder that holds the problem file (the layout of `shared/`);
+    /// absolute paths are kept.
+    pub fn load(path: impl AsRef<Path>, data_root: Option<&Path>) -> Result<Problem> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let file: ProblemFile = serde_json::from_str(&text)
+            .map_err(|e| Error::malformed(path, format!("not a valid problem file: {e}")))?;
+        if file.scans.len() < 2 || file.scans.len() != file.poses.len() {
+            return Err(Error::malformed(
+                path,
+                format!(
+                    "a problem needs at least 2 scans and one pose per scan, found {} scans and {} poses",
+                    file.scans.len(),
+                    file.poses.len()
+                ),
+            ));
+        }
+        let root: PathBuf = match data_root {
+            Some(r) => r.to_path_buf(),
+            None => path
+                .parent()
+                .and_then(Path::parent)
+                .map(Path::to_path_buf)
+                .unwrap_or_else(|| PathBuf::from(".")),
+        };
+        let mut poses = Vec::with_capacity(file.poses.len());
+        let mut notes = Vec::new();
+        for (k, p) in file.poses.iter().enumerate() {
+            let m = Transform::from_fn(|i, j| p[i][j]);
+            if is_rigid(&m, EXACT_TOLERANCE) {
+                poses.push(m);
+            } else if is_rigid(&m, POSE_TOLERANCE) {
+                notes.push(format!(
+                    "pose {} is rigid only to {POSE_TOLERANCE:e}; replaced by the nearest rigid transform",
+                    k + 1
+                ));
+                poses.push(nearest_rigid(&m));
+            } else {
+                return Err(Error::malformed(
+                    path,
+                    format!(
+                        "pose {} is not a rigid transform (not even to {POSE_TOLERANCE:e})",
+                        k + 1
+                    ),
+                ));
+            }
+        }
+        Ok(Problem {
+            name: file.name,
+            scans: file.scans.iter().map(|s| root.join(s)).collect(),
+            poses,
+            notes,
+        })
+    }
+
+    /// The view graph of the scans in file order (a pair, or a ring).
+    pub fn graph(&self) -> Result<ViewGraph> {
+        ViewGraph::for_views(self.scans.len())
+    }
+
+    /// The ground truth of every edge of [`Problem::graph`] (`T_ts = pose_t^-1 pose_s`; for
+    /// three scans `[T12, T23, T31]`).
+    pub fn ground_truth(&self) -> Result<Vec<Transform>> {
+        Ok(self.graph()?.edge_transforms(&self.poses))
+    }
+
+    /// Reads the scans.
+    pub fn read_scans(&self) -> Result<Vec<PointCloud>> {
+        self.scans.iter().map(read_ply).collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::se3::decode;
+
+    fn write(name: &str, text: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("mtpcr-problem-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join(name);
+        std::fs::write(&p, text).unwrap();
+        p
+    }
+
+    fn rows(t: &Transform) -> String {
+        serde_json::to_string(&crate::io::matrix_rows(t)).unwrap()
+    }
+
+    #[test]
+    fn poses_rigid_to_a_thousandth_are_accepted_and_garbage_is_not() {
+        let good = decode(&[10.0, 20.0, 30.0, 0.1, 0.2, 0.3]);
+        let mut rough = good;
+        rough[(0, 0)] += 4e-4; // as printed by a data set
+        let text = format!(
+            r#"{{"name": "p", "scans": ["a.ply", "/abs/b.ply"], "poses": [{}, {}]}}"#,
+            rows(&good),
+            rows(&rough)
+        );
+        let p = Problem::load(write("ok.json", &text), None).unwrap();
+        assert_eq!(p.poses[0], good, "exactly rigid poses are kept as written");
+        assert!(is_rigid(&p.poses[1], 1e-12) && (p.poses[1] - good).norm() < 1e-3);
+        assert_eq!(p.notes.len(), 1, "{:?}", p.notes);
+        assert_eq!(p.scans[1], PathBuf::from("/abs/b.ply"));
+        assert_eq!(p.ground_truth().unwrap().len(), 1, "two scans: one edge");
+
+        let mut bad = good;
+        bad[(0, 0)] += 0.1;
+        let text = format!(
+            r#"{{"name": "p", "scans": ["a.ply", "b.ply"], "poses": [{}, {}]}}"#,
+            rows(&good),
+            rows(&bad)
+        );
+        let e = Problem::load(write("bad.json", &text), None).unwrap_err();
+        assert!(e.to_string().contains("pose 2 is not a rigid"), "{e}");
+        let e = Problem::load(write("one.json", r#"{"name": "p", "scans": ["a"], "poses": []}"#), None)
+            .unwrap_err();
+        assert!(e.to_string().contains("at least 2 scans"), "{e}");
+    }
+}

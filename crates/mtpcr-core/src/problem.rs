@@ -1,0 +1,241 @@
+//! Preparation: the clouds of a view graph downsampled, centred and indexed once, with the
+//! inlier radius eps and the translation bound shift, ready to be searched with any seed or
+//! evolution setting.
+
+use crate::cloud::{PointCloud, Sampling};
+use crate::config::Config;
+use crate::error::{Error, Result};
+use crate::graph::ViewGraph;
+use crate::loss::{CappedDistanceLoss, InlierLoss, Loss};
+use crate::refine::RefineCloud;
+use crate::search::{IndexedCloud, SearchMethod};
+use crate::se3::{translation, Rigid, Transform};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use std::time::Instant;
+
+/// Fewest points a cloud may have (and fewest kept by downsampling).
+pub const MIN_POINTS: usize = 10;
+
+/// The clouds of a view graph, downsampled, centred and indexed (see the module docs).
+#[derive(Debug)]
+pub struct PreparedProblem {
+    graph: ViewGraph,
+    clouds: Vec<IndexedCloud>,
+    /// Full-resolution centred clouds for the refinement (built only when it is on).
+    full: Option<Vec<RefineCloud>>,
+    centroids: Vec<[f64; 3]>,
+    eps: f64,
+    shift: f64,
+    sample_ratio: f64,
+    sampling: Sampling,
+    search: SearchMethod,
+    aiding_cap_ratio: f64,
+    seconds: f64,
+}
+
+impl PreparedProblem {
+    /// Prepares clouds given in loop order: two clouds are one pair, more form a ring
+    /// ([`ViewGraph::for_views`]).
+    pub fn new(clouds: &[PointCloud], config: &Config) -> Result<PreparedProblem> {
+        PreparedProblem::with_graph(clouds, ViewGraph::for_views(clouds.len())?, config)
+    }
+
+    /// Validates the clouds and the config, downsamples (random sampling uses `config.seed`, or
+    /// 0 without one), centres, derives eps and shift, and builds the search structures.
+    pub fn with_graph(
+        clouds: &[PointCloud],
+        graph: ViewGraph,
+        config: &Config,
+    ) -> Result<PreparedProblem> {
+        let start = Instant::now();
+        config.validate()?;
+        if clouds.len() != graph.views() {
+            return Err(Error::InvalidInput(format!(
+                "{} clouds given for a view graph of {} views",
+                clouds.len(),
+                graph.views()
+            )));
+        }
+        for (i, c) in clouds.iter().enumerate() {
+            c.validate(&format!("cloud {}", i + 1), MIN_POINTS)?;
+        }
+        let pool = thread_pool(config.num_threads)?;
+        let sampled: Vec<PointCloud> = pool.install(|| {
+            use rayon::prelude::*;
+            clouds
+                .par_iter()
+                .enumerate()
+                .map(|(i, c)| {
+                    let count = ((c.len() as f64 * config.sample_ratio).round() as usize)
+                        .max(MIN_POINTS)
+                        .min(c.len());
+                    match config.sampling {
+                        Sampling::Farthest => c.farthest_point_sample(count),
+                        Sampling::Random => {
+                            let seed = config.seed.unwrap_or(0) ^ (0x5eed_0000 + i as u64);
+                            c.random_sample(count, &mut ChaCha8Rng::seed_from_u64(seed))
+                        }
+                    }
+                })
+                .collect()
+        });
+        let centroids: Vec<[f64; 3]> = sampled.iter().map(PointCloud::centroid).collect();
+        let centred: Vec<PointCloud> = sampled
+            .iter()
+            .zip(&centroids)
+            .map(|(c, m)| c.translated([-m[0], -m[1], -m[2]]))
+            .collect();
+        for (i, c) in centred.iter().enumerate() {
+            c.validate(&format!("cloud {} after downsampling", i + 1), 2)?;
+        }
+        let d = centred
+            .iter()
+            .map(PointCloud::mean_nearest_neighbor_distance)
+            .sum::<f64>()
+            / centred.len() as f64;
+        let eps = std::f64::consts::FRAC_1_SQRT_2 * d;
+        let shift = centred
+            .iter()
+            .map(PointCloud::largest_side)
+            .fold(0.0, f64::max);
+        if !(eps > 0.0 && shift > 0.0) {
+            return Err(Error::DegenerateCloud {
+                cloud: "the downsampled clouds".to_string(),
+            });
+        }
+        let cap = config.aiding_cap_ratio * shift;
+        let search = config.search;
+        let indexed: Vec<IndexedCloud> = pool.install(|| {
+            use rayon::prelude::*;
+            centred
+                .into_par_iter()
+                .map(|c| IndexedCloud::new(c.into_points(), eps, cap, search))
+                .collect()
+        });
+        let full = (config.refine_iterations > 0).then(|| {
+            pool.install(|| {
+                use rayon::prelude::*;
+                clouds
+                    .par_iter()
+                    .zip(&centroids)
+                    .map(|(c, m)| {
+                        RefineCloud::new(c.translated([-m[0], -m[1], -m[2]]).into_points())
+                    })
+                    .collect()
+            })
+        });
+        Ok(PreparedProblem {
+            graph,
+            clouds: indexed,
+            full,
+            centroids,
+            eps,
+            shift,
+            sample_ratio: config.sample_ratio,
+            sampling: config.sampling,
+            search,
+            aiding_cap_ratio: config.aiding_cap_ratio,
+            seconds: start.elapsed().as_secs_f64(),
+        })
+    }
+
+    /// The view graph.
+    pub fn graph(&self) -> &ViewGraph {
+        &self.graph
+    }
+
+    /// The prepared (downsampled, centred) clouds.
+    pub fn clouds(&self) -> &[IndexedCloud] {
+        &self.clouds
+    }
+
+    /// Inlier radius `sqrt(2)/2 * d`.
+    pub fn eps(&self) -> f64 {
+        self.eps
+    }
+
+    /// Largest bounding-box side of the prepared clouds (the translation bound).
+    pub fn shift(&self) -> f64 {
+        self.shift
+    }
+
+    /// Seconds spent preparing.
+    pub fn seconds(&self) -> f64 {
+        self.seconds
+    }
+
+    /// The full-resolution clouds of the refinement, when it was prepared.
+    pub(crate) fn refine_clouds(&self) -> Option<&[RefineCloud]> {
+        self.full.as_deref()
+    }
+
+    /// The losses of edge `edge` for a transform given in the ORIGINAL frames:
+    /// `(aiding loss, original local loss)` (the loop term needs the other edges and is left
+    /// out). `two_way` selects the two-directional aiding loss.
+    pub fn edge_losses(&self, edge: usize, t: &Transform, two_way: bool) -> (f64, f64) {
+        let e = self.graph.edges()[edge];
+        let inner = Rigid::from_matrix(&self.to_centred(e.source, e.target, t));
+        let aiding = self.aiding_loss(edge, two_way).evaluate(&inner);
+        let original = self.inlier_loss(e.source, e.target).evaluate(&inner);
+        (aiding, original)
+    }
+
+    /// The original task's local loss between two prepared clouds.
+    pub(crate) fn inlier_loss(&self, source: usize, target: usize) -> InlierLoss<'_> {
+        InlierLoss {
+            source: &self.clouds[source],
+            target: &self.clouds[target],
+        }
+    }
+
+    /// The aiding loss of an edge.
+    pub(crate) fn aiding_loss(&self, edge: usize, two_way: bool) -> CappedDistanceLoss<'_> {
+        let e = self.graph.edges()[edge];
+        CappedDistanceLoss {
+            source: &self.clouds[e.source],
+            target: &self.clouds[e.target],
+            two_way,
+        }
+    }
+
+    /// Fails with the name of the first preparation setting of `config` that differs from the
+    /// one this problem was prepared with.
+    pub(crate) fn check_prepared_with(&self, config: &Config) -> Result<()> {
+        let differs = [
+            ("sample_ratio", config.sample_ratio != self.sample_ratio),
+            ("sampling", config.sampling != self.sampling),
+            ("search", config.search != self.search),
+            ("aiding_cap_ratio", config.aiding_cap_ratio != self.aiding_cap_ratio),
+        ];
+        match differs.iter().find(|(_, d)| *d) {
+            Some((field, _)) => Err(Error::config(
+                field,
+                "differs from the value this problem was prepared with; prepare it again",
+            )),
+            None => Ok(()),
+        }
+    }
+
+    /// `t` (cloud `s` -> cloud `d`, original frames) in the centred frames.
+    pub(crate) fn to_centred(&self, s: usize, d: usize, t: &Transform) -> Transform {
+        let cs = self.centroids[s];
+        let ct = self.centroids[d];
+        translation([-ct[0], -ct[1], -ct[2]]) * t * translation(cs)
+    }
+
+    /// `t` (cloud `s` -> cloud `d`, centred frames) in the original frames.
+    pub(crate) fn to_original(&self, s: usize, d: usize, t: &Transform) -> Transform {
+        let cs = self.centroids[s];
+        let ct = self.centroids[d];
+        translation(ct) * t * translation([-cs[0], -cs[1], -cs[2]])
+    }
+}
+
+/// A pool of `num_threads` workers (0 = all cores).
+pub(crate) fn thread_pool(num_threads: usize) -> Result<rayon::ThreadPool> {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(num_threads)
+        .build()
+        .map_err(|e| Error::InvalidInput(format!("cannot start {num_threads} threads: {e}")))
+}

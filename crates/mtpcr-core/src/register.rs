@@ -1,0 +1,316 @@
+//! The registration pipeline: prepare, search every edge (independent restarts of the chosen
+//! evolution, the best kept), start the refinement from the best spanning tree, refine all
+//! clouds jointly, and report the result in the original frames.
+
+use crate::cloud::PointCloud;
+use crate::config::{Config, Method};
+use crate::ea::{self, Observer, Outcome, Progress, SearchBox, Tasks};
+use crate::error::{Error, Result};
+use crate::loss::Loss;
+use crate::problem::{thread_pool, PreparedProblem};
+use crate::refine::refine_poses;
+use crate::result::{EdgeEstimate, Registration};
+use crate::se3::{invert_rigid, Rigid, Transform};
+use std::ops::ControlFlow;
+use std::time::Instant;
+
+impl PreparedProblem {
+    /// Runs the search (and the refinement, when configured). `config`'s preparation
+    /// settings (sampling, search, aiding cap) must be those this problem was prepared with.
+    pub fn register(
+        &self,
+        config: &Config,
+        observer: Option<Observer<'_>>,
+    ) -> Result<Registration> {
+        let start = Instant::now();
+        config.validate()?;
+        self.check_prepared_with(config)?;
+        let seed = config.seed.unwrap_or_else(rand::random);
+        let pool = thread_pool(config.num_threads)?;
+        let graph = self.graph();
+        let edges = graph.edges().len();
+        let aiding: Vec<_> = (0..edges)
+            .map(|e| self.aiding_loss(e, config.two_way_aiding))
+            .collect();
+        let original: Vec<_> = graph
+            .edges()
+            .iter()
+            .map(|e| self.inlier_loss(e.source, e.target))
+            .collect();
+        let mut losses: Vec<&dyn Loss> = aiding.iter().map(|l| l as &dyn Loss).collect();
+        losses.extend(original.iter().map(|l| l as &dyn Loss));
+        let tasks = Tasks {
+            graph,
+            losses,
+            search_box: SearchBox::for_shift(self.shift()),
+            shift: self.shift(),
+        };
+        let (out, evaluations, generations_run, completed) =
+            search(&tasks, config, seed, &pool, observer);
+
+        let evolved: Vec<Rigid> = (0..edges)
+            .map(|e| Rigid::from_individual(&out.best[edges + e]))
+            .collect();
+        let (centred, refined_poses) = if config.refine_iterations > 0 {
+            let poses = self.refine_centred(&evolved, config.refine_iterations, &pool)?;
+            let pairs = graph
+                .edges()
+                .iter()
+                .map(|e| {
+                    let t = invert_rigid(&poses[e.target].to_matrix()) * poses[e.source].to_matrix();
+                    Rigid::from_matrix(&t)
+                })
+                .collect();
+            (pairs, Some(poses))
+        } else {
+            (evolved, None)
+        };
+        let costs = &out.best_costs;
+        let estimates: Vec<EdgeEstimate> = graph
+            .edges()
+            .iter()
+            .enumerate()
+            .map(|(k, e)| EdgeEstimate {
+                source: e.source,
+                target: e.target,
+                t_target_source: self.to_original(e.source, e.target, &centred[k].to_matrix()),
+                original_cost: costs[edges + k],
+                aiding_cost: costs[k],
+            })
+            .collect();
+        let poses = match refined_poses {
+            Some(w) => (0..graph.views())
+                .map(|v| self.to_original(v, 0, &w[v].to_matrix()))
+                .collect(),
+            None => self.poses_without_refinement(&estimates),
+        };
+        Ok(Registration {
+            edges: estimates,
+            poses,
+            task_names: graph.task_names(),
+            history: out.history,
+            evaluations,
+            generations_run,
+            completed,
+            seconds: start.elapsed().as_secs_f64(),
+            seed,
+            eps: self.eps(),
+            shift: self.shift(),
+        })
+    }
+
+    /// Refines given edge transforms (original frames, in edge order; e.g. an earlier result
+    /// or the user's own guess) by `config.refine_iterations` steps of the joint ICP that
+    /// `register` ends with. The result closes a loop exactly. The problem must have been
+    /// prepared with `refine_iterations > 0`.
+    pub fn refine(&self, transforms: &[Transform], config: &Config) -> Result<Vec<Transform>> {
+        config.validate()?;
+        if config.refine_iterations == 0 {
+            return Err(Error::config(
+                "refine_iterations",
+                "must be at least 1 to refine",
+            ));
+        }
+        let graph = self.graph();
+        if transforms.len() != graph.edges().len() {
+            return Err(Error::InvalidInput(format!(
+                "{} transforms given for {} edges",
+                transforms.len(),
+                graph.edges().len()
+            )));
+        }
+        for (k, t) in transforms.iter().enumerate() {
+            if !t.iter().all(|v| v.is_finite()) {
+                return Err(Error::InvalidInput(format!(
+                    "{} has a non-finite entry",
+                    graph.edge_name(k)
+                )));
+            }
+        }
+        let pool = thread_pool(config.num_threads)?;
+        let centred: Vec<Rigid> = graph
+            .edges()
+            .iter()
+            .zip(transforms)
+            .map(|(e, t)| Rigid::from_matrix(&self.to_centred(e.source, e.target, t)))
+            .collect();
+        let poses = self.refine_centred(&centred, config.refine_iterations, &pool)?;
+        Ok(graph
+            .edges()
+            .iter()
+            .map(|e| {
+                let t = invert_rigid(&poses[e.target].to_matrix()) * poses[e.source].to_matrix();
+                self.to_original(e.source, e.target, &Rigid::from_matrix(&t).to_matrix())
+            })
+            .collect())
+    }
+
+    /// The joint ICP from the best spanning tree of `pairs` (centred frames, edge order);
+    /// returns the refined pose of every view in view 0's centred frame.
+    fn refine_centred(
+        &self,
+        pairs: &[Rigid],
+        iterations: usize,
+        pool: &rayon::ThreadPool,
+    ) -> Result<Vec<Rigid>> {
+        let full = self.refine_clouds().ok_or_else(|| {
+            Error::config(
+                "refine_iterations",
+                "this problem was prepared without refinement; prepare it again",
+            )
+        })?;
+        let start = self.consistent_start(pairs);
+        Ok(refine_poses(
+            full,
+            self.graph().edges(),
+            start,
+            self.eps(),
+            iterations,
+            pool,
+        ))
+    }
+
+    /// Poses of every view in view 0's centred frame from the spanning tree of the graph
+    /// (for a ring: every edge but one) whose loop-closed result has the lowest total local
+    /// loss, so one poorly solved pair does not spoil the start of the refinement.
+    fn consistent_start(&self, pairs: &[Rigid]) -> Vec<Rigid> {
+        let graph = self.graph();
+        let m: Vec<Transform> = pairs.iter().map(Rigid::to_matrix).collect();
+        if !graph.is_ring() {
+            // A single edge: view 1's pose is the inverse of the edge.
+            return vec![Rigid::from_matrix(&Transform::identity()), pairs[0].inverse()];
+        }
+        let trees: Vec<Vec<Transform>> = (0..graph.edges().len())
+            .map(|left_out| graph.ring_poses(&m, left_out))
+            .collect();
+        let loss = |w: &[Transform]| -> f64 {
+            graph
+                .edges()
+                .iter()
+                .map(|e| {
+                    let t = Rigid::from_matrix(&(invert_rigid(&w[e.target]) * w[e.source]));
+                    self.inlier_loss(e.source, e.target).evaluate(&t)
+                })
+                .sum()
+        };
+        let best = trees
+            .iter()
+            .min_by(|a, b| loss(a).total_cmp(&loss(b)))
+            .expect("a ring has edges");
+        best.iter().map(Rigid::from_matrix).collect()
+    }
+
+    /// Poses (original frames) from unrefined edge estimates: a pair's inverse, or for a
+    /// ring the spanning path that leaves out the edge of highest original cost.
+    fn poses_without_refinement(&self, estimates: &[EdgeEstimate]) -> Vec<Transform> {
+        let t: Vec<Transform> = estimates.iter().map(|e| e.t_target_source).collect();
+        if !self.graph().is_ring() {
+            return vec![Transform::identity(), invert_rigid(&t[0])];
+        }
+        let worst = (0..estimates.len())
+            .max_by(|&a, &b| estimates[a].original_cost.total_cmp(&estimates[b].original_cost))
+            .unwrap_or(0);
+        self.graph().ring_poses(&t, worst)
+    }
+}
+
+/// Runs `config.restarts` independent evolutions and keeps the one with the lowest sum of
+/// final original-task costs; returns it with the evaluations, generations run (all
+/// restarts) and whether the observer let every restart finish.
+fn search(
+    tasks: &Tasks<'_>,
+    config: &Config,
+    seed: u64,
+    pool: &rayon::ThreadPool,
+    observer: Option<Observer<'_>>,
+) -> (Outcome, usize, usize, bool) {
+    let mut keep_going = |_: &Progress| ControlFlow::Continue(());
+    let observer = observer.unwrap_or(&mut keep_going);
+    let total_generations = config.restarts * config.generations;
+    let mut best: Option<Outcome> = None;
+    let mut evaluations = 0;
+    let mut generations_run = 0;
+    let mut completed = true;
+    for r in 0..config.restarts {
+        // Restart 0 uses the seed itself, so one restart is exactly the paper's run.
+        let run_seed = if r == 0 {
+            seed
+        } else {
+            derive_seed(seed, r as u64)
+        };
+        let offset = generations_run;
+        let done_before = evaluations;
+        let mut forward = |p: &Progress| {
+            observer(&Progress {
+                generation: offset + p.generation,
+                generations: total_generations,
+                evaluations: done_before + p.evaluations,
+                ..p.clone()
+            })
+        };
+        let out = match config.method {
+            Method::Mtpcr => ea::mtpcr::run_mtpcr(tasks, config, run_seed, pool, &mut forward),
+            Method::Mfea => ea::mfea::run_mfea(tasks, config, run_seed, pool, &mut forward, false),
+            Method::Gmfea => ea::mfea::run_mfea(tasks, config, run_seed, pool, &mut forward, true),
+        };
+        evaluations += out.evaluations;
+        generations_run += out.generations_run;
+        let stopped = !out.completed;
+        if best
+            .as_ref()
+            .is_none_or(|b| out.original_total() < b.original_total())
+        {
+            best = Some(out);
+        }
+        if stopped {
+            completed = false;
+            break;
+        }
+    }
+    let best = best.expect("at least one restart runs");
+    (best, evaluations, generations_run, completed)
+}
+
+/// A well-mixed seed for restart `r` (splitmix64 of the pair).
+fn derive_seed(seed: u64, r: u64) -> u64 {
+    let mut z = seed ^ r.wrapping_mul(0x9e37_79b9_7f4a_7c15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
+/// Registers overlapping clouds with no initial guess: two clouds as one pair, three or more
+/// given in loop order as a ring (cloud k overlaps cloud k + 1, the last closes the loop).
+///
+/// Returns one estimate per edge (for three clouds T12, T23, T31; `T_ij` maps cloud i into
+/// cloud j's frame) and one pose per cloud, in the clouds' original frames. `observer`, if
+/// given, is called after every generation and may stop the run.
+pub fn register(
+    clouds: &[PointCloud],
+    config: &Config,
+    observer: Option<Observer<'_>>,
+) -> Result<Registration> {
+    let start = Instant::now();
+    let mut config = config.clone();
+    config.validate()?;
+    config.seed = Some(config.seed.unwrap_or_else(rand::random));
+    let prepared = PreparedProblem::new(clouds, &config)?;
+    let mut result = prepared.register(&config, observer)?;
+    result.seconds = start.elapsed().as_secs_f64();
+    Ok(result)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn restart_seeds_are_distinct_and_restart_zero_is_the_seed() {
+        let seeds: Vec<u64> = (1..50).map(|r| derive_seed(7, r)).collect();
+        let mut unique = seeds.clone();
+        unique.sort_unstable();
+        unique.dedup();
+        assert_eq!(unique.len(), seeds.len());
+        assert!(!seeds.contains(&7));
+    }
+}

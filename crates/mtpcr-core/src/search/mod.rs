@@ -1,0 +1,363 @@
+//! Nearest-neighbour indexes: the questions the losses ask about a cloud, and the structures
+//! that answer them.
+//!
+//! Every evaluation moves every point of one cloud (or two) and asks one question per point
+//! about the other cloud:
+//! - the original task: "is there a point within eps?" ([`InlierIndex`]);
+//! - the aiding task: "how far is the nearest point, capped at `cap`?" ([`DistanceIndex`]).
+//!
+//! Implementations: [`KdTreeIndex`] (exact, the reference; answers both), [`InlierGrid`] (O(1),
+//! the same answers as the KD-tree) and [`DistanceField`] (O(1), within
+//! [`DistanceIndex::error_bound`] of the KD-tree). [`IndexedCloud`] holds a cloud's points with
+//! one index of each kind, chosen by [`SearchMethod`]; the losses take any of them.
+//!
+//! **Adding a structure**: one file implementing [`InlierIndex`] or [`DistanceIndex`], one
+//! line in the oracle lists of this module's tests (which check it against the KD-tree on
+//! random and real-size queries), and a [`SearchMethod`] variant if users should select it.
+
+mod field;
+mod grid;
+mod grid_frame;
+mod kdtree;
+
+pub use field::DistanceField;
+pub use grid::InlierGrid;
+pub use kdtree::KdTreeIndex;
+
+use crate::se3::Rigid;
+use std::sync::Arc;
+
+/// Which indexes answer the losses' nearest-neighbour questions.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SearchMethod {
+    /// KD-tree queries (the reference; slow).
+    Exact,
+    /// Occupancy grid and distance field (O(1) per point; same inlier counts as `Exact`).
+    Fast,
+}
+
+/// Node spacing of the distance field, in units of eps. 2.0 builds the three fields of
+/// bunny-a in about 0.1 s against 0.6 s for 1.0; the aiding loss only has to be coarse.
+const FIELD_NODE_PER_EPS: f64 = 2.0;
+
+/// Answers "is some point of the cloud within eps of `p` (distance <= eps)?".
+pub trait InlierIndex: Send + Sync + std::fmt::Debug {
+    /// The radius the index was built for.
+    fn eps(&self) -> f64;
+
+    /// Is some point within eps of `p`? False for non-finite `p`.
+    fn has_point_within(&self, p: &[f64; 3]) -> bool;
+
+    /// Number of `points`, moved by `t`, that have a point within eps; `None` as soon as
+    /// fewer than `needed` can be reached (`needed = 0` never gives up).
+    fn count_within(&self, points: &[[f64; 3]], t: &Rigid, needed: usize) -> Option<usize> {
+        count_chunked(points, needed, |p| self.has_point_within(&t.apply(p)))
+    }
+
+    /// Bytes held beyond the points.
+    fn memory_bytes(&self) -> usize {
+        0
+    }
+}
+
+/// Answers "how far is the nearest point of the cloud from `p`, capped at `cap`?".
+pub trait DistanceIndex: Send + Sync + std::fmt::Debug {
+    /// The cap the index was built for.
+    fn cap(&self) -> f64;
+
+    /// `min(distance to the nearest point, cap)`, within [`DistanceIndex::error_bound`].
+    fn capped_distance(&self, p: &[f64; 3]) -> f64;
+
+    /// The largest possible difference from the exact capped distance (0 for exact indexes).
+    fn error_bound(&self) -> f64 {
+        0.0
+    }
+
+    /// Sum over `points`, moved by `t`, of the capped distance, added to `start` in order;
+    /// `None` as soon as `sum / divisor >= limit` is certain.
+    fn sum_capped_distance(
+        &self,
+        points: &[[f64; 3]],
+        t: &Rigid,
+        start: f64,
+        divisor: f64,
+        limit: f64,
+    ) -> Option<f64> {
+        sum_chunked(points, start, divisor, limit, |p| {
+            self.capped_distance(&t.apply(p))
+        })
+    }
+
+    /// Bytes held beyond the points.
+    fn memory_bytes(&self) -> usize {
+        0
+    }
+}
+
+/// One prepared cloud with its two indexes, built once and shared read-only.
+#[derive(Debug)]
+pub struct IndexedCloud {
+    points: Vec<[f64; 3]>,
+    inlier: Arc<dyn InlierIndex>,
+    distance: Arc<dyn DistanceIndex>,
+}
+
+impl IndexedCloud {
+    /// Sorts `points` for cache-friendly queries and builds the indexes of `method` for the
+    /// inlier radius `eps` and the distance cap `cap`. `points` must be non-empty and finite
+    /// (the registration checks this first).
+    pub fn new(points: Vec<[f64; 3]>, eps: f64, cap: f64, method: SearchMethod) -> IndexedCloud {
+        let points = morton_sorted(points);
+        let kd = Arc::new(KdTreeIndex::new(&points, eps, cap));
+        match method {
+            SearchMethod::Exact => IndexedCloud {
+                points,
+                inlier: kd.clone(),
+                distance: kd,
+            },
+            SearchMethod::Fast => {
+                let (lo, hi) = crate::cloud::bounds(&points);
+                let grid = InlierGrid::build(&points, lo, hi, eps);
+                let field =
+                    DistanceField::build(kd.tree(), lo, hi, eps * FIELD_NODE_PER_EPS, cap);
+                IndexedCloud {
+                    points,
+                    inlier: Arc::new(grid),
+                    distance: Arc::new(field),
+                }
+            }
+        }
+    }
+
+    /// A cloud with indexes built elsewhere (they must index exactly `points`).
+    pub fn with_indexes(
+        points: Vec<[f64; 3]>,
+        inlier: Arc<dyn InlierIndex>,
+        distance: Arc<dyn DistanceIndex>,
+    ) -> IndexedCloud {
+        IndexedCloud {
+            points,
+            inlier,
+            distance,
+        }
+    }
+
+    /// The points (in a space-filling-curve order, which keeps queries cache-friendly).
+    pub fn points(&self) -> &[[f64; 3]] {
+        &self.points
+    }
+
+    /// The inlier radius the indexes were built for.
+    pub fn eps(&self) -> f64 {
+        self.inlier.eps()
+    }
+
+    /// The distance cap the indexes were built for.
+    pub fn cap(&self) -> f64 {
+        self.distance.cap()
+    }
+
+    /// The inlier index.
+    pub fn inliers(&self) -> &dyn InlierIndex {
+        &*self.inlier
+    }
+
+    /// The distance index.
+    pub fn distances(&self) -> &dyn DistanceIndex {
+        &*self.distance
+    }
+
+    /// Bytes held by the indexes.
+    pub fn memory_bytes(&self) -> usize {
+        self.inlier.memory_bytes() + self.distance.memory_bytes()
+    }
+}
+
+#[inline(always)]
+fn dist2(a: &[f64; 3], b: &[f64; 3]) -> f64 {
+    let dx = a[0] - b[0];
+    let dy = a[1] - b[1];
+    let dz = a[2] - b[2];
+    dx * dx + dy * dy + dz * dz
+}
+
+
+/// Points between two checks of an early exit.
+const CHUNK: usize = 64;
+
+/// Counts the points that pass `hit`; gives up (`None`) once `needed` is out of reach.
+#[inline(always)]
+fn count_chunked(
+    points: &[[f64; 3]],
+    needed: usize,
+    hit: impl Fn(&[f64; 3]) -> bool,
+) -> Option<usize> {
+    let mut count = 0usize;
+    let mut left = points.len();
+    for chunk in points.chunks(CHUNK) {
+        count += chunk.iter().filter(|p| hit(p)).count();
+        left -= chunk.len();
+        if count + left < needed {
+            return None;
+        }
+    }
+    Some(count)
+}
+
+/// Adds `value` over the points to `start` in order; gives up (`None`) once the running sum
+/// divided by `divisor` reaches `limit` (every value is >= 0, so the sum only grows).
+#[inline(always)]
+fn sum_chunked(
+    points: &[[f64; 3]],
+    start: f64,
+    divisor: f64,
+    limit: f64,
+    value: impl Fn(&[f64; 3]) -> f64,
+) -> Option<f64> {
+    let mut sum = start;
+    for chunk in points.chunks(CHUNK) {
+        for p in chunk {
+            sum += value(p);
+        }
+        if sum / divisor >= limit {
+            return None;
+        }
+    }
+    Some(sum)
+}
+
+/// Sorts points along a Morton (Z-order) curve so that consecutive queries touch nearby cells.
+fn morton_sorted(mut points: Vec<[f64; 3]>) -> Vec<[f64; 3]> {
+    if points.len() < 2 {
+        return points;
+    }
+    let (lo, hi) = crate::cloud::bounds(&points);
+    let ext = (0..3)
+        .map(|k| hi[k] - lo[k])
+        .fold(0.0, f64::max)
+        .max(f64::MIN_POSITIVE);
+    let scale = 1023.0 / ext;
+    let spread = |mut v: u64| {
+        v &= 0x3ff;
+        v = (v | (v << 16)) & 0x0300_00ff;
+        v = (v | (v << 8)) & 0x0300_f00f;
+        v = (v | (v << 4)) & 0x030c_30c3;
+        (v | (v << 2)) & 0x0924_9249
+    };
+    let key = |p: &[f64; 3]| {
+        let q: [u64; 3] = std::array::from_fn(|k| ((p[k] - lo[k]) * scale) as u64);
+        spread(q[0]) | (spread(q[1]) << 1) | (spread(q[2]) << 2)
+    };
+    points.sort_by_cached_key(|p| (key(p), p[0].to_bits(), p[1].to_bits(), p[2].to_bits()));
+    points
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+    use rand::{RngExt, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    /// Points of a wavy 2 x 2 surface.
+    pub(crate) fn surface_points(n: usize, seed: u64) -> Vec<[f64; 3]> {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        (0..n)
+            .map(|_| {
+                let u: f64 = rng.random_range(-1.0..1.0);
+                let v: f64 = rng.random_range(-1.0..1.0);
+                [u, v, 0.2 * (3.0 * u).sin() * (2.0 * v).cos()]
+            })
+            .collect()
+    }
+
+    type MakeInlier = fn(&[[f64; 3]], f64) -> Arc<dyn InlierIndex>;
+    type MakeDistance = fn(&[[f64; 3]], f64, f64) -> Arc<dyn DistanceIndex>;
+
+    /// Every inlier index, checked against the KD-tree (add a new structure here).
+    const INLIER_INDEXES: &[(&str, MakeInlier)] = &[("grid", |p, eps| {
+        let (lo, hi) = crate::cloud::bounds(p);
+        Arc::new(InlierGrid::build(p, lo, hi, eps))
+    })];
+
+    /// Every distance index, checked against the KD-tree within its error bound.
+    const DISTANCE_INDEXES: &[(&str, MakeDistance)] = &[("field", |p, eps, cap| {
+        let (lo, hi) = crate::cloud::bounds(p);
+        let kd = KdTreeIndex::new(p, eps, cap);
+        Arc::new(DistanceField::build(kd.tree(), lo, hi, 2.0 * eps, cap))
+    })];
+
+    #[test]
+    fn inlier_indexes_answer_as_the_kd_tree_on_random_queries() {
+        let pts = surface_points(3000, 1);
+        let eps = 0.03;
+        let exact = KdTreeIndex::new(&pts, eps, 0.2);
+        for (name, make) in INLIER_INDEXES {
+            let index = make(&pts, eps);
+            let mut rng = ChaCha8Rng::seed_from_u64(2);
+            let mut hits = 0;
+            for _ in 0..200_000 {
+                let q = [
+                    rng.random_range(-1.1..1.1),
+                    rng.random_range(-1.1..1.1),
+                    rng.random_range(-0.3..0.3),
+                ];
+                let fast = index.has_point_within(&q);
+                assert_eq!(fast, exact.has_point_within(&q), "{name} {q:?}");
+                hits += fast as usize;
+            }
+            assert!(hits > 1000, "the test must exercise both answers ({hits})");
+        }
+    }
+
+    #[test]
+    fn inlier_indexes_agree_on_cell_boundaries_and_the_points_themselves() {
+        let pts = surface_points(500, 3);
+        let exact = KdTreeIndex::new(&pts, 0.05, 0.2);
+        for (name, make) in INLIER_INDEXES {
+            let index = make(&pts, 0.05);
+            for p in &pts {
+                assert!(index.has_point_within(p), "{name}");
+                for d in [0.05, -0.05, 0.0499999, 0.0500001] {
+                    let q = [p[0] + d, p[1], p[2]];
+                    assert_eq!(index.has_point_within(&q), exact.has_point_within(&q));
+                }
+            }
+            assert!(!index.has_point_within(&[f64::NAN, 0.0, 0.0]), "{name}");
+            assert!(!index.has_point_within(&[1e300, 0.0, 0.0]), "{name}");
+        }
+    }
+
+    #[test]
+    fn distance_indexes_are_within_their_bound_of_the_kd_tree() {
+        let pts = surface_points(3000, 4);
+        let exact = KdTreeIndex::new(&pts, 0.03, 0.2);
+        for (name, make) in DISTANCE_INDEXES {
+            let index = make(&pts, 0.03, 0.2);
+            let bound = index.error_bound();
+            assert!(bound > 0.0 && bound < 0.2, "{name}: {bound}");
+            let mut rng = ChaCha8Rng::seed_from_u64(5);
+            let mut worst: f64 = 0.0;
+            for _ in 0..50_000 {
+                let q = [
+                    rng.random_range(-1.5..1.5),
+                    rng.random_range(-1.5..1.5),
+                    rng.random_range(-0.6..0.6),
+                ];
+                worst = worst.max((index.capped_distance(&q) - exact.capped_distance(&q)).abs());
+            }
+            assert!(worst <= bound, "{name}: {worst} > {bound}");
+            assert_eq!(index.capped_distance(&[50.0, 0.0, 0.0]), 0.2, "{name}");
+        }
+    }
+
+    #[test]
+    fn huge_extent_enlarges_cells_instead_of_exhausting_memory() {
+        let mut pts = surface_points(200, 9);
+        pts.push([100.0, 100.0, 100.0]);
+        let c = IndexedCloud::new(pts, 1e-3, 0.5, SearchMethod::Fast);
+        assert!(c.memory_bytes() < 64 << 20);
+        let q = [100.0, 100.0, 100.0 + 5e-4];
+        assert!(c.inliers().has_point_within(&q));
+    }
+}

@@ -1,1 +1,0 @@
-//! Integration tests of mtpcr live in `tests/`.
