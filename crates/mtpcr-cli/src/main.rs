@@ -9,6 +9,7 @@ mod output;
 mod plots;
 mod progress;
 mod settings;
+mod viewer;
 
 use clap::{CommandFactory, Parser, Subcommand};
 use error::{outln, CliResult, Failure};
@@ -59,7 +60,7 @@ enum Command {
     ///
     /// The folder holds result.json, config.toml (the settings, to repeat the run),
     /// transforms.txt, merged.ply (the clouds in cloud 1's frame, one colour per view),
-    /// convergence.png and views.png.
+    /// convergence.png, views.png and view.html (an interactive 3-D view, opens offline).
     Register {
         /// The three clouds, in loop order (T12, T23, T31).
         #[arg(num_args = 3, required = true, action = clap::ArgAction::Set, value_names = ["CLOUD1.ply", "CLOUD2.ply", "CLOUD3.ply"])]

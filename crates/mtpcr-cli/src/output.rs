@@ -7,13 +7,14 @@ use mtpcr_core::{Config, PointCloud, Registration, TASK_NAMES};
 use std::path::{Path, PathBuf};
 
 /// The files a run writes, in the order they are written.
-pub const OUTPUT_FILES: [&str; 6] = [
+pub const OUTPUT_FILES: [&str; 7] = [
     "result.json",
     "config.toml",
     "transforms.txt",
     "merged.ply",
     "convergence.png",
     "views.png",
+    "view.html",
 ];
 
 /// The direction convention, in one sentence.
@@ -258,6 +259,11 @@ pub fn write_results(dir: &Path, rec: &RunRecord<'_>) -> CliResult<Vec<PathBuf>>
         &labels,
         &path("views.png"),
     )?;
+
+    let before: Vec<&[[f64; 3]]> = rec.clouds.iter().map(PointCloud::points).collect();
+    let after: Vec<&[[f64; 3]]> = moved.iter().map(PointCloud::points).collect();
+    let html = crate::viewer::viewer_html(&before, &after, &labels, "", "mtpcr: registered scans");
+    write_file(&path("view.html"), html.as_bytes())?;
     Ok(OUTPUT_FILES.iter().map(|n| path(n)).collect())
 }
 
