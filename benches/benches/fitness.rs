@@ -3,17 +3,30 @@
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use mtpcr_benches::bunny_a_or_synthetic;
-use mtpcr_core::fitness::{CappedDistanceLoss, InlierLoss, Loss, SearchMethod};
+use mtpcr_core::loss::{CappedDistanceLoss, InlierLoss, Loss};
 use mtpcr_core::se3::{decode, random_rigid, Rigid};
-use mtpcr_core::{Config, PreparedProblem};
+use mtpcr_core::{Config, PreparedProblem, SearchMethod};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use std::hint::black_box;
 
 fn losses(c: &mut Criterion) {
     let (clouds, label) = bunny_a_or_synthetic();
-    let prepared = PreparedProblem::new(&clouds, &Config::default()).expect("prepares");
-    let [a, b, _] = prepared.clouds();
+    // The same prepared points indexed both ways.
+    let prepare = |search| {
+        let config = Config {
+            search,
+            ..Config::default()
+        };
+        PreparedProblem::new(&clouds, &config).expect("prepares")
+    };
+    let (fast, exact) = (prepare(SearchMethod::Fast), prepare(SearchMethod::Exact));
+    let prepared = &fast;
+    let (a, b) = (&fast.clouds()[0], &fast.clouds()[1]);
+    let by_method = |method| match method {
+        SearchMethod::Fast => (&fast.clouds()[0], &fast.clouds()[1]),
+        SearchMethod::Exact => (&exact.clouds()[0], &exact.clouds()[1]),
+    };
     // A mix of poses like a population's: random ones and some near the identity.
     let mut rng = ChaCha8Rng::seed_from_u64(1);
     let mut poses: Vec<Rigid> = (0..48)
@@ -27,11 +40,8 @@ fn losses(c: &mut Criterion) {
     let mut group = c.benchmark_group(format!("original_loss/{label}"));
     group.throughput(Throughput::Elements(points * poses.len() as u64));
     for method in [SearchMethod::Exact, SearchMethod::Fast] {
-        let loss = InlierLoss {
-            source: a,
-            target: b,
-            method,
-        };
+        let (source, target) = by_method(method);
+        let loss = InlierLoss { source, target };
         group.bench_with_input(
             BenchmarkId::from_parameter(format!("{method:?}")),
             &poses,
@@ -52,10 +62,10 @@ fn losses(c: &mut Criterion) {
         a.points().len() as u64 * poses.len() as u64,
     ));
     for method in [SearchMethod::Exact, SearchMethod::Fast] {
+        let (source, target) = by_method(method);
         let loss = CappedDistanceLoss {
-            source: a,
-            target: b,
-            method,
+            source,
+            target,
             two_way: false,
         };
         group.bench_with_input(

@@ -9,6 +9,7 @@ mod output;
 mod plots;
 mod progress;
 mod settings;
+mod viewer;
 
 use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 use error::{outln, CliResult, Failure};
@@ -61,7 +62,8 @@ enum Command {
     /// Two clouds give T12; three or more, given in loop order (cloud k overlaps cloud k+1,
     /// the last closes the loop with the first), give T12, T23, ..., Tn1. The folder holds
     /// result.json, config.toml (the settings, to repeat the run), transforms.txt, merged.ply
-    /// (the clouds in cloud 1's frame, one colour per view), convergence.png and views.png.
+    /// (the clouds in cloud 1's frame, one colour per view), convergence.png, views.png and
+    /// view.html (an interactive 3-D view that opens offline).
     Register {
         /// The clouds, in loop order.
         #[arg(num_args = 2.., required = true, value_name = "CLOUD.ply")]

@@ -7,13 +7,14 @@ use mtpcr_core::{Config, PointCloud, Registration};
 use std::path::{Path, PathBuf};
 
 /// The files a run writes, in the order they are written.
-pub const OUTPUT_FILES: [&str; 6] = [
+pub const OUTPUT_FILES: [&str; 7] = [
     "result.json",
     "config.toml",
     "transforms.txt",
     "merged.ply",
     "convergence.png",
     "views.png",
+    "view.html",
 ];
 
 /// The direction convention, in one sentence.
@@ -307,6 +308,8 @@ pub fn write_results(dir: &Path, rec: &RunRecord<'_>) -> CliResult<Vec<PathBuf>>
     let before: Vec<&[[f64; 3]]> = rec.clouds.iter().map(PointCloud::points).collect();
     let after: Vec<&[[f64; 3]]> = moved.iter().map(PointCloud::points).collect();
     plots::views_png(&before, &after, &labels, &path("views.png"))?;
+    let html = crate::viewer::viewer_html(&before, &after, &labels, "", "mtpcr: registered scans");
+    write_file(&path("view.html"), html.as_bytes())?;
     Ok(OUTPUT_FILES.iter().map(|n| path(n)).collect())
 }
 

@@ -566,6 +566,14 @@ mod tests {
     use super::*;
 
     #[test]
+    fn the_3d_viewer_starts_with_the_view_colors() {
+        assert_eq!(
+            VIEW_COLORS[..],
+            crate::viewer::SCAN_COLORS[..VIEW_COLORS.len()]
+        );
+    }
+
+    #[test]
     fn tick_labels_share_their_decimals_and_hide_rounding_noise() {
         let f = tick_format(0.012, 0.014);
         assert_eq!(

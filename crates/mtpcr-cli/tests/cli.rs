@@ -234,6 +234,7 @@ fn register_writes_every_output_file() {
         "merged.ply",
         "convergence.png",
         "views.png",
+        "view.html",
     ] {
         let len = std::fs::metadata(out.join(name))
             .map(|m| m.len())
