@@ -9,7 +9,8 @@ fn main() {
     println!("cargo::rustc-check-cfg=cfg(shared_data)");
     println!("cargo::rerun-if-env-changed=MTPCR_SHARED_DIR");
     println!("cargo::rerun-if-changed=build.rs");
-    let manifest = std::path::PathBuf::from(std::env::var_os("CARGO_MANIFEST_DIR").unwrap_or_default());
+    let manifest =
+        std::path::PathBuf::from(std::env::var_os("CARGO_MANIFEST_DIR").unwrap_or_default());
     if let Some(dir) = find_shared_dir_from(&manifest) {
         println!("cargo::rustc-cfg=shared_data");
         println!("cargo::rustc-env=MTPCR_SHARED_DIR_FOUND={}", dir.display());

@@ -1,11 +1,12 @@
 """mtpcr: multi-view point cloud registration by evolutionary multitasking (MTPCR).
 
-Three overlapping scans that form a loop are registered with no initial guess: six
-populations evolve together (three pairwise tasks whose loss includes a loop-closure term,
-three easier aiding tasks) and share what they find inside each pair and around the loop.
+Overlapping scans are registered with no initial guess: two scans as one pair, three or more
+given in loop order as a loop. Each pair is a pair of tasks (the original one, with a
+loop-closure term, and an easier aiding one); their populations evolve together and share
+what they find inside each pair and around the loop.
 
 Convention: ``T_ij`` maps points of cloud i into the frame of cloud j,
-``x_j = T_ij @ [x_i, 1]``; a registration returns ``T12``, ``T23`` and ``T31``.
+``x_j = T_ij @ [x_i, 1]``; three clouds give ``T12``, ``T23`` and ``T31``.
 
 Example::
 
@@ -31,6 +32,8 @@ from ._mtpcr import (
     Problem,
     Registration,
     __version__,
+    evaluate,
+    find_shared_dir,
     load_problem,
     read_ply,
     register,
@@ -44,6 +47,8 @@ __all__ = [
     "Problem",
     "Registration",
     "__version__",
+    "evaluate",
+    "find_shared_dir",
     "load_problem",
     "read_ply",
     "register",

@@ -20,10 +20,10 @@ _Callback = Callable[[int, dict[str, float]], bool | None]
 __version__: str
 """The package version (the Cargo workspace version)."""
 
-TASK_NAMES: tuple[str, str, str, str, str, str]
-"""The six tasks: ``("J1-a", "J2-a", "J3-a", "J1-o", "J2-o", "J3-o")``; aiding tasks ``-a``,
-original tasks ``-o``, for the pairs 1->2, 2->3, 3->1. Keys of ``best_costs``, columns of
-``history``."""
+TASK_NAMES: tuple[str, ...]
+"""The six tasks of three clouds: ``("J1-a", "J2-a", "J3-a", "J1-o", "J2-o", "J3-o")``;
+aiding tasks ``-a``, original tasks ``-o``, for the pairs 1->2, 2->3, 3->1. (A registration of
+N clouds has its own, ``Registration.task_names``.)"""
 
 MIN_POINTS: int
 """Fewest points a cloud may have."""
@@ -73,114 +73,139 @@ class Config:
         """A copy with the given fields changed (validated like the constructor)."""
     def to_dict(self) -> dict[str, Any]:
         """Every field and its value, in declaration order (``Config(**c.to_dict()) == c``)."""
+    @staticmethod
+    def field_docs() -> dict[str, str]:
+        """The documentation of every field, by name, in declaration order (the same text as
+        the Rust docs and the CLI help)."""
     def __eq__(self, other: object) -> bool: ...
     @property
     def method(self) -> _Method:
-        """The evolutionary algorithm: ``"mtpcr"`` (the paper's method) or the baselines
-        ``"mfea"``, ``"gmfea"``."""
+        """The evolutionary algorithm: `mtpcr` (the paper's method), or the baselines
+        `mfea`, `gmfea`. Paper: mtpcr."""
     @property
     def population_size(self) -> int:
-        """Individuals per population (six populations). At least 4. Paper: 100."""
+        """Individuals per population (`n`; two populations per edge of the view graph).
+        In 4..=1000000. Paper: 100."""
     @property
     def generations(self) -> int:
-        """Generations after the initial one. Paper: 60."""
+        """Generations after the initial one (`G`), at most 1000000. Paper: 60."""
     @property
     def sample_ratio(self) -> float:
         """Fraction of each cloud's points kept by downsampling, in (0, 1]. Paper: 0.05."""
     @property
     def sampling(self) -> _Sampling:
-        """Downsampling method, ``"farthest"`` (paper) or ``"random"``."""
+        """Downsampling method: `farthest` (farthest-point sampling) or `random`. Paper:
+        farthest."""
     @property
     def p_intra(self) -> float:
-        """Probability of intra-task sharing (aiding <-> original elites), in [0, 1]. Paper: 0.5."""
+        """Probability per generation and edge of intra-task sharing (aiding <->
+        original elites), in [0, 1]. Paper: 0.5."""
     @property
     def p_inter(self) -> float:
-        """Probability of inter-task sharing (estimate composed around the loop), in [0, 1].
-        Paper: 0.5."""
+        """Probability per generation and edge of inter-task sharing (the estimate
+        composed from the rest of the loop), in [0, 1]. Paper: 0.5."""
     @property
     def top_ratio(self) -> float:
-        """Fraction of a population kept as elites, in (0, 1]. Paper: 0.1."""
+        """Fraction of a population kept as elites (and shared per channel), in (0, 1].
+        Paper: 0.1."""
     @property
     def scale_factor(self) -> float:
-        """Differential-evolution scale factor F, in (0, 2]. Paper: 0.5."""
+        """Differential-evolution scale factor `F`, in (0, 2]. Paper: 0.5."""
     @property
     def sbx_eta_start(self) -> float:
         """SBX distribution index at the first generation, in [0, 1000]. Paper: 2."""
     @property
     def sbx_eta_end(self) -> float:
-        """SBX distribution index approached at the last generation, in [0, 1000]. Paper: 10."""
+        """SBX distribution index approached at the last generation, in [0, 1000].
+        Paper: 10."""
     @property
     def alpha(self) -> float:
-        """Weight of the loop-closure term ``alpha * tanh(||C - I||_F)``, >= 0. Paper: 0.05."""
+        """Weight of the loop-closure term `alpha * tanh(||C - I||_F)` in the original
+        tasks' loss, finite and >= 0. Paper: 0.05."""
     @property
     def aiding_cap_ratio(self) -> float:
-        """Aiding loss distance cap as a fraction of the largest bounding-box side, in (0, 10].
-        Paper: 0.1."""
+        """The aiding loss caps each point's distance at this fraction of `shift` (the
+        largest bounding-box side), in (0, 10]. Paper: 0.1."""
     @property
     def two_way_aiding(self) -> bool:
-        """Aiding loss in both directions. Paper: False."""
+        """Aiding loss in both directions (source -> target and target -> source).
+        Paper: false."""
     @property
     def unit_free_loop_term(self) -> bool:
-        """Divide the loop term's translations by the shift so it has no unit. Paper: False."""
+        """Divide the loop term's translations by `shift` so the term has no unit.
+        Paper: false."""
     @property
     def refresh_loop_term(self) -> bool:
-        """Recompute the parents' loop terms every generation. Paper: False."""
+        """Recompute the parents' loop terms each generation from the new bests. Paper:
+        false (parents keep the loss they were scored with)."""
     @property
     def search(self) -> _Search:
-        """Search structure of the losses, ``"fast"`` or ``"exact"`` (same inlier counts)."""
+        """Search structure of the losses: `fast` (occupancy grid and distance field;
+        the same inlier counts as `exact`) or `exact` (KD-tree; the reference). Paper:
+        fast."""
     @property
     def restarts(self) -> int:
-        """Independent evolutions; the best is kept (beyond the paper). At least 1. Paper: 1."""
+        """Independent evolutions (each with its own seed derived from `seed`); the one
+        with the lowest sum of final original-task costs is kept (beyond the paper). In
+        1..=1000. Paper: 1."""
     @property
     def refine_iterations(self) -> int:
-        """Joint trimmed-ICP iterations of the three clouds (closes the loop); 0 = off. Paper: 0."""
+        """Iterations of the joint trimmed point-to-plane ICP of all clouds after the
+        evolution, which closes the loop exactly (beyond the paper); 0 = off, at most
+        10000. Paper: 0."""
     @property
     def num_threads(self) -> int:
-        """Worker threads; 0 = all cores. The result does not depend on it."""
+        """Worker threads for the loss evaluations; 0 = all cores, at most 4096. The
+        result does not depend on it."""
     @property
     def seed(self) -> int | None:
-        """Seed of the run; None draws one (reported in the result)."""
+        """Seed of the run; none draws one (reported in the result)."""
 
 class Registration:
     """The result of :func:`register`. Read-only.
 
-    ``T_ij`` maps points of cloud i into the frame of cloud j: ``x_j = T_ij @ [x_i, 1]``.
+    ``T_ij`` maps points of cloud i into the frame of cloud j: ``x_j = T_ij @ [x_i, 1]``. Each
+    edge's transform is an attribute named so: ``T12`` for two clouds; ``T12``, ``T23``,
+    ``T31`` for three; ``T12`` ... ``Tn1`` for n in a loop (``T3_10`` style beyond nine).
+    Costs are the evolution's, before the refinement.
     """
 
-    @property
-    def T12(self) -> NDArray[np.float64]:
-        """4x4 transform mapping cloud 1 into cloud 2's frame."""
-    @property
-    def T23(self) -> NDArray[np.float64]:
-        """4x4 transform mapping cloud 2 into cloud 3's frame."""
-    @property
-    def T31(self) -> NDArray[np.float64]:
-        """4x4 transform mapping cloud 3 into cloud 1's frame."""
+    def __getattr__(self, name: str) -> NDArray[np.float64]:
+        """The 4x4 transform of the edge named ``name`` (``"T12"``, ...)."""
     @property
     def transforms(self) -> NDArray[np.float64]:
-        """``[T12, T23, T31]``, shape (3, 4, 4)."""
+        """The edge transforms in edge order, shape (K, 4, 4) (``[T12, T23, T31]`` for three
+        clouds)."""
+    @property
+    def edges(self) -> list[dict[str, Any]]:
+        """One dict per edge: ``name``, ``source``, ``target`` (clouds numbered from 0),
+        ``t_target_source`` (4x4), ``original_cost``, ``aiding_cost``."""
+    def t_target_source(self, target: int, source: int) -> NDArray[np.float64]:
+        """The 4x4 transform mapping cloud ``source`` into cloud ``target``'s frame (clouds
+        numbered from 0)."""
     @property
     def poses(self) -> NDArray[np.float64]:
-        """Each cloud into cloud 1's frame, ``[I, inv(T12), T31]``, shape (3, 4, 4)."""
+        """Each cloud into cloud 1's frame (``poses[0]`` is the identity), shape (N, 4, 4)."""
     @property
-    def loop_residual(self) -> float:
-        """``||T31 @ T23 @ T12 - I||_F``."""
+    def loop_residual(self) -> float | None:
+        """``||T_n1 ... T23 @ T12 - I||_F`` for a loop of three or more clouds, else None."""
     @property
     def best_costs(self) -> dict[str, float]:
-        """Best final cost of each task, keyed by ``TASK_NAMES``."""
+        """The evolution's final best cost of each task, keyed by ``task_names``."""
     @property
     def history(self) -> NDArray[np.float64]:
-        """Best costs after the initial population and every generation, shape (rows, 6),
-        columns in ``TASK_NAMES`` order."""
+        """Best costs of the kept evolution after its initial population and every
+        generation, shape (rows, tasks), columns in ``task_names`` order."""
     @property
-    def task_names(self) -> tuple[str, str, str, str, str, str]:
-        """``TASK_NAMES``."""
+    def task_names(self) -> tuple[str, ...]:
+        """``J1-a``, ``J2-a``, ..., then ``J1-o``, ``J2-o``, ...: the aiding and original task
+        of each edge."""
     @property
     def evaluations(self) -> int:
-        """Loss evaluations made."""
+        """Loss evaluations made (all restarts)."""
     @property
     def generations_run(self) -> int:
-        """Generations run (fewer than configured when the run was stopped)."""
+        """Generations run, all restarts together (fewer when the run was stopped)."""
     @property
     def completed(self) -> bool:
         """False when ``on_generation`` stopped the run early."""
@@ -201,30 +226,28 @@ class Registration:
         """The Config of the run as a dict, seed included."""
 
 class Problem:
-    """A three-view problem with ground truth (from :func:`load_problem`). Read-only."""
+    """A problem with ground truth (from :func:`load_problem`). Read-only."""
 
     @property
     def name(self) -> str:
         """Short name (``"bunny-a"``)."""
     @property
     def scans(self) -> list[str]:
-        """The three scan files, resolved against the data root."""
+        """The scan files, resolved against the data root."""
     @property
     def poses(self) -> NDArray[np.float64]:
-        """Ground-truth scan-to-world poses, shape (3, 4, 4)."""
+        """Ground-truth scan-to-world poses, shape (N, 4, 4)."""
     @property
     def ground_truth(self) -> NDArray[np.float64]:
-        """Ground truth ``[T12, T23, T31]``, shape (3, 4, 4)."""
-    def read_scans(
-        self,
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-        """Reads the three scans as (N, 3) float64 arrays."""
+        """Ground truth of each edge (``[T12, T23, T31]`` for three scans), shape (K, 4, 4)."""
+    @property
+    def notes(self) -> list[str]:
+        """What loading changed (poses re-orthonormalised)."""
+    def read_scans(self) -> tuple[NDArray[np.float64], ...]:
+        """Reads the scans as (N, 3) float64 arrays."""
 
 def register(
-    cloud1: ArrayLike,
-    cloud2: ArrayLike,
-    cloud3: ArrayLike,
-    *,
+    *clouds: ArrayLike,
     seed: int | None = None,
     on_generation: _Callback | None = None,
     config: Config | None = None,
@@ -249,11 +272,12 @@ def register(
     refine_iterations: int = ...,
     num_threads: int = ...,
 ) -> Registration:
-    """Registers three overlapping (N, 3) clouds that form a loop, with no initial guess.
+    """Registers overlapping (N, 3) clouds with no initial guess: ``register(a, b)`` for two,
+    ``register(a, b, c, ...)`` or ``register(*clouds)`` for three or more in loop order.
 
     Settings are ``Config`` fields as keywords, over ``config`` (default ``Config()``).
     ``on_generation(generation, best_costs)`` is called after every generation
-    (``generation`` counts 1, 2, ... across restarts; ``best_costs`` maps ``TASK_NAMES`` to
+    (``generation`` counts 1, 2, ... across restarts; ``best_costs`` maps the task names to
     the best cost so far); returning False stops the run (``completed=False``), None or True
     continues; an exception in it, or Ctrl-C, stops the run and propagates.
     """
@@ -265,4 +289,23 @@ def write_ply(path: _Path, points: ArrayLike, colors: ArrayLike | None = None) -
     """Writes points (and optional (N, 3) uint8 colours) as a binary PLY file."""
 
 def load_problem(path: _Path, data_root: _Path | None = None) -> Problem:
-    """Reads a problem file (``shared/problems/*.json``)."""
+    """Reads a problem file (``shared/problems/*.json``): two or more scans with poses."""
+
+def evaluate(
+    suite: str,
+    problems: list[_Path],
+    *,
+    runs: int | None = None,
+    seeds: list[int] | None = None,
+    variants: list[str] | None = None,
+    generations: int | None = None,
+    data_root: _Path | None = None,
+    on_run: Callable[[dict[str, Any]], bool | None] | None = None,
+) -> list[dict[str, Any]]:
+    """Runs an experiment suite (``"accuracy"``, ``"quality"``, ``"noise"``, ``"alpha"``,
+    ``"sharing"``, ``"sampling"``) on problem files: one record per run, the same as the
+    lines ``mtpcr experiment`` writes to ``runs.jsonl``."""
+
+def find_shared_dir() -> str | None:
+    """The shared data folder (``$MTPCR_SHARED_DIR``, else the nearest ``shared/`` beside the
+    current directory or an ancestor), or None."""

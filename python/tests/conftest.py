@@ -116,6 +116,14 @@ def small_views() -> ThreeViews:
 
 
 def shared_dir() -> Path:
-    """``$MTPCR_SHARED_DIR`` or ``../shared`` beside the repository."""
-    env = os.environ.get("MTPCR_SHARED_DIR")
-    return Path(env) if env else REPO_ROOT.parent / "shared"
+    """The shared data folder (``mtpcr.find_shared_dir``: ``$MTPCR_SHARED_DIR``, else the
+    nearest ``shared/`` beside the working directory or an ancestor); skips the calling test,
+    with the reason, when there is none."""
+    import mtpcr
+
+    found = mtpcr.find_shared_dir()
+    if found is None:
+        pytest.skip(
+            "no shared data found (set MTPCR_SHARED_DIR to the folder holding problems/ and data/)"
+        )
+    return Path(found)

@@ -126,11 +126,15 @@ def test_unknown_setting_is_a_type_error_naming_it(good, call):
             mtpcr.Config().replace(generatoins=3)
 
 
-def test_wrong_number_of_clouds_is_a_type_error(good):
-    with pytest.raises(TypeError):
-        mtpcr.register(good[0], good[1])  # type: ignore[call-arg]
-    with pytest.raises(TypeError):
-        mtpcr.register(*good, 5)  # type: ignore[misc]
+def test_fewer_than_two_clouds_or_a_stray_argument_is_an_error(good):
+    with pytest.raises(TypeError, match="at least two clouds"):
+        mtpcr.register(good[0])
+    with pytest.raises(TypeError, match="at least two clouds"):
+        mtpcr.register()
+    with pytest.raises(ValueError, match="cloud4"):
+        mtpcr.register(*good, 5)
+    with pytest.raises(TypeError, match="at least two clouds"):
+        mtpcr.register(list(good))  # one list is one argument, not three clouds
 
 
 def test_bad_ply_arguments(tmp_path):

@@ -73,7 +73,7 @@ def test_malformed_files_are_value_errors_naming_the_file(tmp_path):
             mtpcr.read_ply(path)
     bad = tmp_path / "bad.json"
     bad.write_text('{"name": "x", "scans": ["a.ply"], "poses": []}')
-    with pytest.raises(ValueError, match="3 scans"):
+    with pytest.raises(ValueError, match="at least 2 scans"):
         mtpcr.load_problem(bad)
     bad.write_text("not json")
     with pytest.raises(ValueError, match="bad.json"):

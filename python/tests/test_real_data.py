@@ -17,11 +17,6 @@ from conftest import REAL_DATA_MAX_ROTATION_ERROR_DEG, rotation_error_deg, share
 def bunny_a():
     shared = shared_dir()
     path = shared / "problems" / "bunny-a.json"
-    if not path.is_file() or not (shared / "data" / "bunny").is_dir():
-        pytest.skip(
-            f"no shared data at {shared} (set MTPCR_SHARED_DIR to the folder holding "
-            "problems/ and data/)"
-        )
     problem = mtpcr.load_problem(path, data_root=shared)
     clouds = [mtpcr.read_ply(scan) for scan in problem.scans]
     return problem, clouds

@@ -10,11 +10,11 @@
 use crate::error::{outln, CliResult, Failure};
 use crate::{plots, progress};
 use clap::Args;
+use mtpcr_core::eval::mean_std;
 use mtpcr_core::eval::problem::Problem;
 use mtpcr_core::eval::protocol::{
     run_one, RunRecord, Suite, Variant, BUNNIES, PAPER_ALPHA, PAPER_ERR_R,
 };
-use mtpcr_core::eval::mean_std;
 use mtpcr_core::{PointCloud, Transform, ViewGraph};
 use std::collections::{BTreeMap, HashSet};
 use std::fmt::Write as _;
@@ -74,7 +74,12 @@ type Key = (String, String, String, u64);
 
 /// The record's key: (suite, variant, problem, seed).
 fn key(r: &RunLine) -> Key {
-    (r.suite.clone(), r.variant.clone(), r.problem.clone(), r.seed)
+    (
+        r.suite.clone(),
+        r.variant.clone(),
+        r.problem.clone(),
+        r.seed,
+    )
 }
 
 /// One planned run.
@@ -277,10 +282,7 @@ pub fn run(args: &ExperimentArgs) -> CliResult<()> {
         if needed.contains(&pi) {
             let scans = p.problem.read_scans()?;
             for (c, path) in scans.iter().zip(&p.problem.scans) {
-                c.validate(
-                    &path.display().to_string(),
-                    mtpcr_core::MIN_POINTS,
-                )?;
+                c.validate(&path.display().to_string(), mtpcr_core::MIN_POINTS)?;
             }
             p.scans = Some(scans);
         }
@@ -601,7 +603,9 @@ fn convergence_figures(
 /// Mean over runs of the history rows (cut to the shortest history).
 fn mean_history(rs: &[&RunLine]) -> Vec<Vec<f64>> {
     let len = rs.iter().map(|r| r.history.len()).min().unwrap_or(0);
-    let tasks = rs.first().map_or(0, |r| r.history.first().map_or(0, Vec::len));
+    let tasks = rs
+        .first()
+        .map_or(0, |r| r.history.first().map_or(0, Vec::len));
     (0..len)
         .map(|g| {
             (0..tasks)

@@ -203,7 +203,12 @@ pub fn result_json(rec: &RunRecord<'_>) -> serde_json::Value {
         .edges
         .iter()
         .zip(&names)
-        .map(|(e, name)| (name.clone(), serde_json::json!(matrix_rows(&e.t_target_source))))
+        .map(|(e, name)| {
+            (
+                name.clone(),
+                serde_json::json!(matrix_rows(&e.t_target_source)),
+            )
+        })
         .collect();
     serde_json::json!({
         "mtpcr_version": env!("CARGO_PKG_VERSION"),
@@ -216,6 +221,11 @@ pub fn result_json(rec: &RunRecord<'_>) -> serde_json::Value {
         "poses": r.poses.iter().map(matrix_rows).collect::<Vec<_>>(),
         "poses_note": "poses[k] maps cloud k+1 into the frame of cloud 1",
         "loop_residual": r.loop_residual(),
+        "best_costs": {
+            "original": r.edges.iter().map(|e| e.original_cost).collect::<Vec<_>>(),
+            "aiding": r.edges.iter().map(|e| e.aiding_cost).collect::<Vec<_>>(),
+        },
+        "best_costs_note": "the evolution's final best cost of each edge's tasks, before refinement",
         "evaluations": r.evaluations,
         "generations_run": r.generations_run,
         "seconds": r.seconds,

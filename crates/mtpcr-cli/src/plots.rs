@@ -14,33 +14,10 @@ static DEJAVU_SANS: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
 /// The family name the embedded font is registered under.
 const FONT: &str = "sans-serif";
 
-/// One colour per view (cloud 1, 2, 3, ...; repeated beyond 20), also used in `merged.ply`.
-pub const VIEW_COLORS: [[u8; 3]; 20] = [
-    [214, 39, 40],
-    [44, 160, 44],
-    [31, 119, 180],
-    [255, 127, 14],
-    [148, 103, 189],
-    [140, 86, 75],
-    [227, 119, 194],
-    [127, 127, 127],
-    [188, 189, 34],
-    [23, 190, 207],
-    [152, 223, 138],
-    [255, 152, 150],
-    [174, 199, 232],
-    [255, 187, 120],
-    [197, 176, 213],
-    [196, 156, 148],
-    [247, 182, 210],
-    [199, 199, 199],
-    [219, 219, 141],
-    [158, 218, 229],
-];
-
-/// The colour of view `i`.
+/// The colour of view `i` (the palette of the 3-D view, so every output agrees; also used in
+/// `merged.ply`).
 pub fn view_color(i: usize) -> [u8; 3] {
-    VIEW_COLORS[i % VIEW_COLORS.len()]
+    crate::viewer::scan_color(i)
 }
 
 /// One colour per edge (J1, J2, J3, ...) in the convergence chart.
@@ -247,7 +224,8 @@ pub(crate) fn methods_convergence_png(
             .map_err(text)?;
         let panels = root.split_evenly((edges, 2));
         for pair in 0..edges {
-            for (col, (first, kind)) in [(0, "aiding"), (edges, "original")].into_iter().enumerate() {
+            for (col, (first, kind)) in [(0, "aiding"), (edges, "original")].into_iter().enumerate()
+            {
                 let task = first + pair;
                 let series: Vec<Series> = methods
                     .iter()
@@ -564,14 +542,6 @@ fn draw_legend<DB: DrawingBackend>(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn the_3d_viewer_starts_with_the_view_colors() {
-        assert_eq!(
-            VIEW_COLORS[..],
-            crate::viewer::SCAN_COLORS[..VIEW_COLORS.len()]
-        );
-    }
 
     #[test]
     fn tick_labels_share_their_decimals_and_hide_rounding_noise() {

@@ -164,7 +164,7 @@ pub fn resolve(run: &RunArgs, seed: Option<u64>) -> CliResult<Config> {
 }
 
 /// Reads a TOML config file over `base`: keys in the file replace `base`'s values, the others
-/// stay (merged by `Config::with_overrides`). Returns the config and the keys the file set.
+/// stay (merged by `Config::merged`; the result is validated after the flags). Returns the config and the keys the file set.
 pub fn read_config_file(path: &Path, base: &Config) -> CliResult<(Config, Vec<String>)> {
     let text = std::fs::read_to_string(path).map_err(|e| {
         Failure(format!(
@@ -185,7 +185,7 @@ pub fn read_config_file(path: &Path, base: &Config) -> CliResult<(Config, Vec<St
     else {
         return Err(bad(&"not a table of settings"));
     };
-    let config = base.with_overrides(&overrides).map_err(|e| bad(&e))?;
+    let config = base.merged(&overrides).map_err(|e| bad(&e))?;
     Ok((config, keys))
 }
 
@@ -268,7 +268,12 @@ pub fn document(mut cmd: clap::Command) -> clap::Command {
                     (Some(d), Some(p)) => format!(" [default: {}; paper: {}]", shown(d), shown(p)),
                     _ => String::new(),
                 };
-                let short = text.split(". ").next().unwrap_or(&text).trim_end_matches('.').to_string();
+                let short = text
+                    .split(". ")
+                    .next()
+                    .unwrap_or(&text)
+                    .trim_end_matches('.')
+                    .to_string();
                 sc = sc.mut_arg(field.name, |a| {
                     a.help(format!("{short}{values}"))
                         .long_help(format!("{text}{values}"))
@@ -315,6 +320,31 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn flag_help_is_the_core_field_doc_with_its_defaults() {
+        let cli = document(crate::Cli::command());
+        let register = cli.find_subcommand("register").unwrap();
+        let help = |id: &str| {
+            let arg = register.get_arguments().find(|a| a.get_id() == id).unwrap();
+            (
+                arg.get_help().unwrap().to_string(),
+                arg.get_long_help().unwrap().to_string(),
+            )
+        };
+        let (short, long) = help("alpha");
+        assert!(
+            short.starts_with("Weight of the loop-closure term"),
+            "{short}"
+        );
+        assert!(short.ends_with("[default: 0.05; paper: 0.05]"), "{short}");
+        let doc = FIELDS.iter().find(|f| f.name == "alpha").unwrap().text();
+        assert!(long.starts_with(&doc), "{long}");
+        let (short, _) = help("restarts");
+        assert!(short.contains("[default: 4; paper: 1]"), "{short}");
+        let (short, _) = help("search");
+        assert!(short.contains("[default: fast; paper: fast]"), "{short}");
     }
 
     #[test]

@@ -26,10 +26,10 @@ pub const BUDGET: usize = 400_000;
 /// Background of the 3-D view.
 pub const BACKGROUND: [u8; 3] = [24, 27, 33];
 
-/// One colour per scan: the first three are `plots::VIEW_COLORS` (so the page matches
-/// `views.png` and `merged.ply`; a test in plots.rs keeps them equal), then the
-/// Okabe-Ito colour-blind-safe set and Paul Tol's muted and light sets, all light enough
-/// for the dark background. Scans past the end reuse the colours from the start.
+/// One colour per scan, for every output (the page, `views.png`, `merged.ply`): red, green
+/// and blue first, then the Okabe-Ito colour-blind-safe set and Paul Tol's muted and light
+/// sets, all light enough for the dark background. Scans past the end reuse the colours
+/// from the start.
 pub const SCAN_COLORS: [[u8; 3]; 20] = [
     [214, 39, 40],
     [44, 160, 44],

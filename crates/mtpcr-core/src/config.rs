@@ -147,7 +147,12 @@ impl Default for Config {
 impl Config {
     /// Checks every field; the error names the first bad one.
     pub fn validate(&self) -> Result<()> {
-        fn check(ok: bool, field: &'static str, rule: &str, value: impl std::fmt::Display) -> Result<()> {
+        fn check(
+            ok: bool,
+            field: &'static str,
+            rule: &str,
+            value: impl std::fmt::Display,
+        ) -> Result<()> {
             if ok {
                 Ok(())
             } else {
@@ -156,8 +161,18 @@ impl Config {
         }
         let unit = |v: f64| (0.0..=1.0).contains(&v);
         let n = self.population_size;
-        check((4..=1_000_000).contains(&n), "population_size", "in 4..=1000000", n)?;
-        check(self.generations <= 1_000_000, "generations", "at most 1000000", self.generations)?;
+        check(
+            (4..=1_000_000).contains(&n),
+            "population_size",
+            "in 4..=1000000",
+            n,
+        )?;
+        check(
+            self.generations <= 1_000_000,
+            "generations",
+            "at most 1000000",
+            self.generations,
+        )?;
         let r = self.sample_ratio;
         check(r > 0.0 && r <= 1.0, "sample_ratio", "in (0, 1]", r)?;
         check(unit(self.p_intra), "p_intra", "in [0, 1]", self.p_intra)?;
@@ -170,17 +185,32 @@ impl Config {
             ("sbx_eta_start", self.sbx_eta_start),
             ("sbx_eta_end", self.sbx_eta_end),
         ] {
-            check(v.is_finite() && (0.0..=1000.0).contains(&v), field, "in [0, 1000]", v)?;
+            check(
+                v.is_finite() && (0.0..=1000.0).contains(&v),
+                field,
+                "in [0, 1000]",
+                v,
+            )?;
         }
         let a = self.alpha;
         check(a.is_finite() && a >= 0.0, "alpha", "finite and >= 0", a)?;
         let c = self.aiding_cap_ratio;
         check(c > 0.0 && c <= 10.0, "aiding_cap_ratio", "in (0, 10]", c)?;
-        check((1..=1000).contains(&self.restarts), "restarts", "in 1..=1000", self.restarts)?;
+        check(
+            (1..=1000).contains(&self.restarts),
+            "restarts",
+            "in 1..=1000",
+            self.restarts,
+        )?;
         let it = self.refine_iterations;
         check(it <= 10_000, "refine_iterations", "at most 10000", it)?;
         let th = self.num_threads;
-        check(th <= 4096, "num_threads", "at most 4096 (0 = all cores)", th)?;
+        check(
+            th <= 4096,
+            "num_threads",
+            "at most 4096 (0 = all cores)",
+            th,
+        )?;
         Ok(())
     }
 
@@ -205,6 +235,14 @@ impl Config {
         &self,
         overrides: &serde_json::Map<String, serde_json::Value>,
     ) -> Result<Config> {
+        let config = self.merged(overrides)?;
+        config.validate()?;
+        Ok(config)
+    }
+
+    /// [`Config::with_overrides`] without the final range check (for layered sources where a
+    /// later layer may still fix a value, as CLI flags over a config file).
+    pub fn merged(&self, overrides: &serde_json::Map<String, serde_json::Value>) -> Result<Config> {
         let serde_json::Value::Object(base) = serde_json::to_value(self).map_err(|e| {
             Error::InvalidInput(format!("the settings could not be serialised: {e}"))
         })?
@@ -227,10 +265,8 @@ impl Config {
             }
             merged.insert(key.clone(), value.clone());
         }
-        let config: Config = serde_json::from_value(serde_json::Value::Object(merged))
-            .map_err(|e| Error::InvalidInput(format!("invalid settings: {e}")))?;
-        config.validate()?;
-        Ok(config)
+        serde_json::from_value(serde_json::Value::Object(merged))
+            .map_err(|e| Error::InvalidInput(format!("invalid settings: {e}")))
     }
 }
 
@@ -262,7 +298,10 @@ mod tests {
         Config::default().validate().unwrap();
         let (p, d) = (Config::paper(), Config::default());
         assert_eq!((p.restarts, p.generations, p.refine_iterations), (1, 60, 0));
-        assert_eq!((d.restarts, d.generations, d.refine_iterations), (4, 30, 20));
+        assert_eq!(
+            (d.restarts, d.generations, d.refine_iterations),
+            (4, 30, 20)
+        );
         assert_eq!(Config::paper().evaluations(6), 72_600);
     }
 

@@ -151,7 +151,12 @@ impl ViewGraph {
     /// The loop product of a ring, `M_{n-1} ... M_1 M_0` with `M_k = bests[k]` except
     /// `M_edge = t` (the identity for a loop-consistent set); `None` when the graph has no
     /// loop.
-    pub fn loop_product(&self, edge: usize, t: &Transform, bests: &[Transform]) -> Option<Transform> {
+    pub fn loop_product(
+        &self,
+        edge: usize,
+        t: &Transform,
+        bests: &[Transform],
+    ) -> Option<Transform> {
         if !self.ring {
             return None;
         }
@@ -235,7 +240,16 @@ mod tests {
     fn ring_of(n: usize) -> (ViewGraph, Vec<Transform>) {
         let g = ViewGraph::ring(n).unwrap();
         let poses: Vec<Transform> = (0..n)
-            .map(|v| decode(&[10.0 * v as f64, -7.0 * v as f64, 3.0, 0.1 * v as f64, 0.2, -0.3]))
+            .map(|v| {
+                decode(&[
+                    10.0 * v as f64,
+                    -7.0 * v as f64,
+                    3.0,
+                    0.1 * v as f64,
+                    0.2,
+                    -0.3,
+                ])
+            })
             .collect();
         let t = g.edge_transforms(&poses);
         (g, t)
@@ -244,7 +258,10 @@ mod tests {
     #[test]
     fn tasks_and_slots_round_trip() {
         let g = ViewGraph::ring(3).unwrap();
-        assert_eq!(g.task_names(), ["J1-a", "J2-a", "J3-a", "J1-o", "J2-o", "J3-o"]);
+        assert_eq!(
+            g.task_names(),
+            ["J1-a", "J2-a", "J3-a", "J1-o", "J2-o", "J3-o"]
+        );
         for s in 0..6 {
             assert_eq!(g.slot(g.task(s)), s);
         }
@@ -271,7 +288,9 @@ mod tests {
                 }
             }
         }
-        assert!(ViewGraph::pair().loop_product(0, &Transform::identity(), &[]).is_none());
+        assert!(ViewGraph::pair()
+            .loop_product(0, &Transform::identity(), &[])
+            .is_none());
     }
 
     #[test]

@@ -39,8 +39,8 @@ pub mod problem;
 mod refine;
 mod register;
 pub mod result;
-pub mod search;
 pub mod se3;
+pub mod search;
 pub mod synthetic;
 
 pub use cloud::{PointCloud, Sampling};
@@ -51,8 +51,8 @@ pub use graph::{Edge, ViewGraph};
 pub use problem::{PreparedProblem, MIN_POINTS};
 pub use register::register;
 pub use result::{EdgeEstimate, Registration};
-pub use search::SearchMethod;
 pub use se3::Transform;
+pub use search::SearchMethod;
 
 /// The README's Rust example, compiled as a doctest so it cannot drift from the API.
 #[doc = include_str!("../../../README.md")]

@@ -2,8 +2,8 @@
 //! the loop-closure term of the original tasks on a ring. The losses ask their questions
 //! through the clouds' indexes (`crate::search`), whatever structure answers them.
 
-use crate::search::IndexedCloud;
 use crate::se3::{Rigid, Transform};
+use crate::search::IndexedCloud;
 
 /// A task loss: the cost of one candidate transform `source -> target`. Lower is better.
 pub trait Loss: Sync {
@@ -106,14 +106,14 @@ impl Loss for CappedDistanceLoss<'_> {
             let forward = self.target.distances().sum_capped_distance(
                 self.source.points(),
                 t,
-                    0.0,
+                0.0,
                 n,
                 limit,
             )?;
             let both = self.source.distances().sum_capped_distance(
                 self.target.points(),
                 &t.inverse(),
-                    forward,
+                forward,
                 n,
                 limit,
             )?;
@@ -122,7 +122,7 @@ impl Loss for CappedDistanceLoss<'_> {
             let forward = self.target.distances().sum_capped_distance(
                 self.source.points(),
                 t,
-                    0.0,
+                0.0,
                 ns,
                 limit,
             )?;
@@ -146,9 +146,9 @@ pub fn loop_term(c: &Transform, alpha: f64, unit_free_shift: Option<f64>) -> f64
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::se3::random_rigid;
     use crate::search::tests::surface_points;
     use crate::search::SearchMethod;
-    use crate::se3::random_rigid;
     use rand::{RngExt, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 

@@ -8,8 +8,8 @@ use crate::error::{Error, Result};
 use crate::graph::ViewGraph;
 use crate::loss::{CappedDistanceLoss, InlierLoss, Loss};
 use crate::refine::RefineCloud;
-use crate::search::{IndexedCloud, SearchMethod};
 use crate::se3::{translation, Rigid, Transform};
+use crate::search::{IndexedCloud, SearchMethod};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use std::time::Instant;
@@ -206,7 +206,10 @@ impl PreparedProblem {
             ("sample_ratio", config.sample_ratio != self.sample_ratio),
             ("sampling", config.sampling != self.sampling),
             ("search", config.search != self.search),
-            ("aiding_cap_ratio", config.aiding_cap_ratio != self.aiding_cap_ratio),
+            (
+                "aiding_cap_ratio",
+                config.aiding_cap_ratio != self.aiding_cap_ratio,
+            ),
         ];
         match differs.iter().find(|(_, d)| *d) {
             Some((field, _)) => Err(Error::config(

@@ -57,7 +57,8 @@ impl PreparedProblem {
                 .edges()
                 .iter()
                 .map(|e| {
-                    let t = invert_rigid(&poses[e.target].to_matrix()) * poses[e.source].to_matrix();
+                    let t =
+                        invert_rigid(&poses[e.target].to_matrix()) * poses[e.source].to_matrix();
                     Rigid::from_matrix(&t)
                 })
                 .collect();
@@ -178,7 +179,10 @@ impl PreparedProblem {
         let m: Vec<Transform> = pairs.iter().map(Rigid::to_matrix).collect();
         if !graph.is_ring() {
             // A single edge: view 1's pose is the inverse of the edge.
-            return vec![Rigid::from_matrix(&Transform::identity()), pairs[0].inverse()];
+            return vec![
+                Rigid::from_matrix(&Transform::identity()),
+                pairs[0].inverse(),
+            ];
         }
         let trees: Vec<Vec<Transform>> = (0..graph.edges().len())
             .map(|left_out| graph.ring_poses(&m, left_out))
@@ -208,7 +212,11 @@ impl PreparedProblem {
             return vec![Transform::identity(), invert_rigid(&t[0])];
         }
         let worst = (0..estimates.len())
-            .max_by(|&a, &b| estimates[a].original_cost.total_cmp(&estimates[b].original_cost))
+            .max_by(|&a, &b| {
+                estimates[a]
+                    .original_cost
+                    .total_cmp(&estimates[b].original_cost)
+            })
             .unwrap_or(0);
         self.graph().ring_poses(&t, worst)
     }

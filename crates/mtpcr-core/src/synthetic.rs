@@ -85,18 +85,20 @@ pub fn three_views(seed: u64, points_per_view: usize) -> SyntheticProblem {
         [a.cos() * e.cos(), e.sin(), a.sin() * e.cos()]
     });
     let motions: [Transform; 3] = std::array::from_fn(|_| random_rigid(&mut rng, SHAPE_SIZE));
-    let clouds: Vec<PointCloud> = (0..3).map(|i| {
-        let v = views[i];
-        let mut pts = Vec::with_capacity(points_per_view);
-        // Visible: the radial direction faces the viewer (a bit beyond the hemisphere).
-        while pts.len() < points_per_view {
-            let u = unit_vector(&mut rng);
-            if u[0] * v[0] + u[1] * v[1] + u[2] * v[2] > -0.2 {
-                pts.push(surface(u));
+    let clouds: Vec<PointCloud> = (0..3)
+        .map(|i| {
+            let v = views[i];
+            let mut pts = Vec::with_capacity(points_per_view);
+            // Visible: the radial direction faces the viewer (a bit beyond the hemisphere).
+            while pts.len() < points_per_view {
+                let u = unit_vector(&mut rng);
+                if u[0] * v[0] + u[1] * v[1] + u[2] * v[2] > -0.2 {
+                    pts.push(surface(u));
+                }
             }
-        }
-        PointCloud::new(pts).transformed(&motions[i])
-    }).collect();
+            PointCloud::new(pts).transformed(&motions[i])
+        })
+        .collect();
     let ground_truth = (0..3)
         .map(|i| motions[(i + 1) % 3] * invert_rigid(&motions[i]))
         .collect();

@@ -103,7 +103,8 @@ fn no_seed_draws_one_and_reports_it() {
     )
     .unwrap();
     assert_eq!(
-        r.transforms(), again.transforms(),
+        r.transforms(),
+        again.transforms(),
         "the reported seed reproduces the run"
     );
 }

@@ -81,10 +81,14 @@ fn identical_inlier_counts_on_bunny_size_synthetic_clouds() {
 }
 
 #[test]
-#[cfg_attr(not(shared_data), ignore = "needs ../shared (or MTPCR_SHARED_DIR), not found at build time")]
+#[cfg_attr(
+    not(shared_data),
+    ignore = "needs ../shared (or MTPCR_SHARED_DIR), not found at build time"
+)]
 fn identical_inlier_counts_on_real_scans() {
     let shared = common::shared_dir();
     let problem =
-        mtpcr_core::eval::problem::Problem::load(shared.join("problems/bunny-a.json"), None).unwrap();
+        mtpcr_core::eval::problem::Problem::load(shared.join("problems/bunny-a.json"), None)
+            .unwrap();
     check(&problem.read_scans().unwrap(), 150, 2);
 }

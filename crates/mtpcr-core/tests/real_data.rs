@@ -3,13 +3,16 @@
 
 mod common;
 
-use mtpcr_core::eval::run_moved;
 use mtpcr_core::eval::problem::Problem;
+use mtpcr_core::eval::run_moved;
 use mtpcr_core::io::read_ply;
 use mtpcr_core::Config;
 
 #[test]
-#[cfg_attr(not(shared_data), ignore = "needs ../shared (or MTPCR_SHARED_DIR), not found at build time")]
+#[cfg_attr(
+    not(shared_data),
+    ignore = "needs ../shared (or MTPCR_SHARED_DIR), not found at build time"
+)]
 fn every_shared_scan_loads() {
     let shared = common::shared_dir();
     let mut count = 0;
@@ -42,13 +45,21 @@ fn every_shared_scan_loads() {
 }
 
 #[test]
-#[cfg_attr(not(shared_data), ignore = "needs ../shared (or MTPCR_SHARED_DIR), not found at build time")]
+#[cfg_attr(
+    not(shared_data),
+    ignore = "needs ../shared (or MTPCR_SHARED_DIR), not found at build time"
+)]
 fn bunny_a_is_registered_within_five_degrees() {
     let shared = common::shared_dir();
     let problem = Problem::load(shared.join("problems/bunny-a.json"), None).unwrap();
     let clouds = problem.read_scans().unwrap();
-    let (result, scores) =
-        run_moved(&clouds, &problem.ground_truth().unwrap(), &Config::default(), 7).unwrap();
+    let (result, scores) = run_moved(
+        &clouds,
+        &problem.ground_truth().unwrap(),
+        &Config::default(),
+        7,
+    )
+    .unwrap();
     assert!(scores.success, "rotation errors {:?} deg", scores.rot_deg);
     assert!(scores.err_r < 0.05, "Err_R {}", scores.err_r);
     assert!(result.loop_residual().unwrap() < 0.05);

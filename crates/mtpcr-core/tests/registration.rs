@@ -102,7 +102,8 @@ fn no_sharing_is_a_setting_and_still_runs() {
     let a = register(&problem.clouds, &nks, None).unwrap();
     let b = register(&problem.clouds, &full, None).unwrap();
     assert_ne!(
-        a.transforms(), b.transforms(),
+        a.transforms(),
+        b.transforms(),
         "the sharing probabilities change the run"
     );
 }
@@ -164,7 +165,9 @@ fn refinement_improves_precision() {
         ..plain.clone()
     };
     let a = score(
-        &register(&problem.clouds, &plain, None).unwrap().transforms(),
+        &register(&problem.clouds, &plain, None)
+            .unwrap()
+            .transforms(),
         &problem.ground_truth,
     );
     let b = score(

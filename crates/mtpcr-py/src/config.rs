@@ -98,6 +98,17 @@ impl PyConfig {
         }
     }
 
+    /// The documentation of every field, by name, in declaration order (the same text as the
+    /// Rust docs and the CLI help).
+    #[staticmethod]
+    fn field_docs(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
+        let dict = PyDict::new(py);
+        for field in mtpcr_core::config::FIELDS {
+            dict.set_item(field.name, field.text())?;
+        }
+        Ok(dict)
+    }
+
     /// The authors' reference setting (the paper's Section IV-C).
     #[staticmethod]
     fn paper() -> Self {

@@ -135,7 +135,10 @@ pub(crate) fn transform_to_py<'py>(py: Python<'py>, t: &Transform) -> Bound<'py,
 }
 
 /// Transforms as a Kx4x4 float64 array.
-pub(crate) fn transforms_to_py<'py>(py: Python<'py>, ts: &[Transform]) -> Bound<'py, PyArray3<f64>> {
+pub(crate) fn transforms_to_py<'py>(
+    py: Python<'py>,
+    ts: &[Transform],
+) -> Bound<'py, PyArray3<f64>> {
     PyArray3::from_owned_array(
         py,
         Array3::from_shape_fn((ts.len(), 4, 4), |(k, i, j)| ts[k][(i, j)]),

@@ -100,7 +100,10 @@ impl PyProblem {
     /// Ground truth of each edge (``[T12, T23, T31]`` for three scans), Kx4x4 float64.
     #[getter]
     fn ground_truth<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray3<f64>>> {
-        Ok(transforms_to_py(py, &self.inner.ground_truth().map_err(to_py)?))
+        Ok(transforms_to_py(
+            py,
+            &self.inner.ground_truth().map_err(to_py)?,
+        ))
     }
 
     /// What loading changed (poses re-orthonormalised), one sentence each.

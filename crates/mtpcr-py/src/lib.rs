@@ -14,6 +14,7 @@
 mod config;
 mod convert;
 mod errors;
+mod evaluate;
 mod files;
 mod run;
 
@@ -29,7 +30,12 @@ fn _mtpcr(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add(
         "TASK_NAMES",
-        PyTuple::new(py, mtpcr_core::ViewGraph::ring(3).expect("3 views").task_names())?,
+        PyTuple::new(
+            py,
+            mtpcr_core::ViewGraph::ring(3)
+                .expect("3 views")
+                .task_names(),
+        )?,
     )?;
     m.add("MIN_POINTS", mtpcr_core::MIN_POINTS)?;
     m.add_class::<config::PyConfig>()?;
@@ -39,5 +45,7 @@ fn _mtpcr(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(files::read_ply, m)?)?;
     m.add_function(wrap_pyfunction!(files::write_ply, m)?)?;
     m.add_function(wrap_pyfunction!(files::load_problem, m)?)?;
+    m.add_function(wrap_pyfunction!(evaluate::evaluate, m)?)?;
+    m.add_function(wrap_pyfunction!(evaluate::find_shared_dir, m)?)?;
     Ok(())
 }

@@ -12,7 +12,11 @@ use pyo3::types::{PyDict, PyTuple};
 use std::ops::ControlFlow;
 
 /// `{task name: cost}` in slot order.
-fn costs_dict<'py>(py: Python<'py>, names: &[String], costs: &[f64]) -> PyResult<Bound<'py, PyDict>> {
+fn costs_dict<'py>(
+    py: Python<'py>,
+    names: &[String],
+    costs: &[f64],
+) -> PyResult<Bound<'py, PyDict>> {
     let dict = PyDict::new(py);
     for (name, cost) in names.iter().zip(costs) {
         dict.set_item(name, *cost)?;
@@ -170,11 +174,7 @@ pub(crate) struct PyRegistration {
 #[pymethods]
 impl PyRegistration {
     /// The transform of edge ``name`` (``T12``, ``T23``, ...), a 4x4 float64 array.
-    fn __getattr__<'py>(
-        &self,
-        py: Python<'py>,
-        name: &str,
-    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    fn __getattr__<'py>(&self, py: Python<'py>, name: &str) -> PyResult<Bound<'py, PyArray2<f64>>> {
         (0..self.inner.edges.len())
             .find(|&k| self.inner.edge_name(k) == name)
             .map(|k| transform_to_py(py, &self.inner.edges[k].t_target_source))

@@ -46,7 +46,9 @@
 //! Children are not pruned (no early exit): whether a child survives depends on the ranks of
 //! the whole pool, so no cost limit is known in advance.
 
-use super::{end_of_generation, sbx_beta, sbx_children, sbx_eta, score_all, Outcome, Progress, Tasks};
+use super::{
+    end_of_generation, sbx_beta, sbx_children, sbx_eta, score_all, Outcome, Progress, Tasks,
+};
 use crate::config::Config;
 use crate::se3::DOF;
 use crate::se3::{decode, Individual, Transform};
@@ -131,9 +133,7 @@ fn best_of(pop: &[Member], s: usize) -> usize {
 /// skill factor `k`; zero for a task without members.
 fn translations(pop: &[Member], tasks: usize, g: usize, generations: usize) -> Vec<Unit> {
     let scale = (g as f64 / generations as f64).powi(2);
-    (0..tasks)
-        .map(|k| translation_of(pop, k, scale))
-        .collect()
+    (0..tasks).map(|k| translation_of(pop, k, scale)).collect()
 }
 
 /// One task's G-MFEA translation (see [`translations`]).
@@ -293,9 +293,8 @@ pub(crate) fn run_mfea(
         })
         .collect();
     let mut pop = select(members, size);
-    let best_costs = |pop: &[Member]| -> Vec<f64> {
-        (0..slots).map(|s| pop[best_of(pop, s)].cost[s]).collect()
-    };
+    let best_costs =
+        |pop: &[Member]| -> Vec<f64> { (0..slots).map(|s| pop[best_of(pop, s)].cost[s]).collect() };
     let mut history = vec![best_costs(&pop)];
 
     let mut shifts = vec![[0.0; DOF]; slots];
@@ -310,7 +309,8 @@ pub(crate) fn run_mfea(
                 let t = decode(&sbox.decode_unit(&m.u));
                 for j in 0..edges {
                     if m.evaluated_on(edges + j) {
-                        m.cost[edges + j] = m.local[edges + j] + tasks.loop_term(j, &t, &bests, config);
+                        m.cost[edges + j] =
+                            m.local[edges + j] + tasks.loop_term(j, &t, &bests, config);
                     }
                 }
             }
@@ -356,7 +356,9 @@ pub(crate) fn run_mfea(
     }
 
     Outcome {
-        best: (0..slots).map(|s| sbox.decode_unit(&pop[best_of(&pop, s)].u)).collect(),
+        best: (0..slots)
+            .map(|s| sbox.decode_unit(&pop[best_of(&pop, s)].u))
+            .collect(),
         best_costs: best_costs(&pop),
         history,
         evaluations,

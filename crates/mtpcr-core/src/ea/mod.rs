@@ -104,7 +104,13 @@ impl Tasks<'_> {
 
     /// The loop term of an original task's candidate `x` for edge `edge`, with the other
     /// edges' bests; 0 without a loop.
-    pub fn loop_term(&self, edge: usize, x: &Transform, bests: &[Transform], config: &Config) -> f64 {
+    pub fn loop_term(
+        &self,
+        edge: usize,
+        x: &Transform,
+        bests: &[Transform],
+        config: &Config,
+    ) -> f64 {
         let unit_free = config.unit_free_loop_term.then_some(self.shift);
         self.graph
             .loop_product(edge, x, bests)
@@ -201,7 +207,9 @@ pub(crate) fn score_all(
             .map(|(slot, x)| {
                 let task = tasks.graph.task(*slot);
                 let lp = match (bests, task.kind) {
-                    (Some(b), TaskKind::Original) => tasks.loop_term(task.edge, &decode(x), b, config),
+                    (Some(b), TaskKind::Original) => {
+                        tasks.loop_term(task.edge, &decode(x), b, config)
+                    }
                     _ => 0.0,
                 };
                 // The margin covers rounding in `local + lp`, so pruning never drops a child

@@ -104,7 +104,14 @@ fn run_mtpcr_with(
         .enumerate()
         .flat_map(|(s, xs)| xs.iter().map(move |x| (s, *x)))
         .collect();
-    let scores = score_all(tasks, config, pool, &jobs, None, &vec![f64::INFINITY; slots]);
+    let scores = score_all(
+        tasks,
+        config,
+        pool,
+        &jobs,
+        None,
+        &vec![f64::INFINITY; slots],
+    );
     let mut evaluations = jobs.len();
     let mut pops: Vec<Population> = init
         .into_iter()
@@ -152,7 +159,10 @@ fn run_mtpcr_with(
             let inter = rng.random::<f64>() < config.p_inter;
             let intra = rng.random::<f64>() < config.p_intra;
             // A single edge has no loop, so no inter-task message (the draw is still made).
-            if let Some(estimate) = inter.then(|| tasks.graph.loop_estimate(j, &bests)).flatten() {
+            if let Some(estimate) = inter
+                .then(|| tasks.graph.loop_estimate(j, &bests))
+                .flatten()
+            {
                 let x = encode(&estimate);
                 for &i in &picks[..k] {
                     v_aid[i] = x;
@@ -292,7 +302,10 @@ mod tests {
             assert_eq!(a.best, b.best);
             assert_eq!(a.history, b.history);
             assert_eq!(a.history[0].len(), graph.task_count());
-            assert!(a.history.last().unwrap()[0] < a.history[0][0], "the search improves");
+            assert!(
+                a.history.last().unwrap()[0] < a.history[0][0],
+                "the search improves"
+            );
         }
     }
 

@@ -153,7 +153,10 @@ mod tests {
         assert!((gt[2] * gt[1] * gt[0] - Transform::identity()).norm() < 1e-12);
         let s = score(&gt, &gt);
         assert!(s.success && s.err_r < 1e-12 && s.err_t < 1e-12);
-        let off = score(&[decode(&[0.0, 0.0, 10.0, 0.0, 0.0, 0.0])], &[Transform::identity()]);
+        let off = score(
+            &[decode(&[0.0, 0.0, 10.0, 0.0, 0.0, 0.0])],
+            &[Transform::identity()],
+        );
         assert!(!off.success && (off.rot_deg[0] - 10.0).abs() < 1e-9);
     }
 

@@ -152,8 +152,11 @@ mod tests {
         );
         let e = Problem::load(write("bad.json", &text), None).unwrap_err();
         assert!(e.to_string().contains("pose 2 is not a rigid"), "{e}");
-        let e = Problem::load(write("one.json", r#"{"name": "p", "scans": ["a"], "poses": []}"#), None)
-            .unwrap_err();
+        let e = Problem::load(
+            write("one.json", r#"{"name": "p", "scans": ["a"], "poses": []}"#),
+            None,
+        )
+        .unwrap_err();
         assert!(e.to_string().contains("at least 2 scans"), "{e}");
     }
 }

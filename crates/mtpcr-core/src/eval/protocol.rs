@@ -230,7 +230,6 @@ pub struct Variant {
     pub noise: Option<f64>,
 }
 
-
 impl Suite {
     /// Every suite, in report order.
     pub const ALL: [Suite; 6] = [

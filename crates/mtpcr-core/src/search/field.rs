@@ -62,7 +62,6 @@ impl DistanceField {
             cap,
         }
     }
-
 }
 
 impl DistanceIndex for DistanceField {
@@ -109,4 +108,3 @@ impl DistanceIndex for DistanceField {
         self.values.len() * 4
     }
 }
-

@@ -152,7 +152,6 @@ impl InlierGrid {
             eps2,
         }
     }
-
 }
 
 impl InlierIndex for InlierGrid {

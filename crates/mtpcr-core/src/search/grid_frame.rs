@@ -12,7 +12,13 @@ pub(crate) struct GridFrame {
 impl GridFrame {
     /// A grid of cells of side `cell` covering `[lo - margin, hi + margin]`, with the cell
     /// side enlarged if the grid would exceed `max_cells`.
-    pub fn covering(lo: [f64; 3], hi: [f64; 3], margin: f64, cell: f64, max_cells: usize) -> GridFrame {
+    pub fn covering(
+        lo: [f64; 3],
+        hi: [f64; 3],
+        margin: f64,
+        cell: f64,
+        max_cells: usize,
+    ) -> GridFrame {
         let ext: [f64; 3] = std::array::from_fn(|k| hi[k] - lo[k] + 2.0 * margin);
         let mut cell = cell;
         loop {

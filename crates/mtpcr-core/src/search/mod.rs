@@ -119,8 +119,7 @@ impl IndexedCloud {
             SearchMethod::Fast => {
                 let (lo, hi) = crate::cloud::bounds(&points);
                 let grid = InlierGrid::build(&points, lo, hi, eps);
-                let field =
-                    DistanceField::build(kd.tree(), lo, hi, eps * FIELD_NODE_PER_EPS, cap);
+                let field = DistanceField::build(kd.tree(), lo, hi, eps * FIELD_NODE_PER_EPS, cap);
                 IndexedCloud {
                     points,
                     inlier: Arc::new(grid),
@@ -181,7 +180,6 @@ fn dist2(a: &[f64; 3], b: &[f64; 3]) -> f64 {
     let dz = a[2] - b[2];
     dx * dx + dy * dy + dz * dz
 }
-
 
 /// Points between two checks of an early exit.
 const CHUNK: usize = 64;

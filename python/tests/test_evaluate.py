@@ -1,0 +1,89 @@
+"""``mtpcr.evaluate`` runs the protocol of ``mtpcr experiment``: the same records for the same
+suite, variant, problem and seed (only the run time differs)."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import mtpcr
+
+from conftest import REPO_ROOT, three_views
+
+
+@pytest.fixture(scope="module")
+def problem_file(tmp_path_factory) -> Path:
+    """A synthetic three-scan problem file (scans as PLY, identity ground-truth poses)."""
+    folder = tmp_path_factory.mktemp("problem")
+    views = three_views(seed=9, points_per_view=800)
+    # Scan-to-world poses: cloud 1 is the world; T12 = inv(pose2) @ pose1, so pose2 = inv(T12).
+    t12, t23, _ = views.ground_truth
+    poses = [np.eye(4), np.linalg.inv(t12), np.linalg.inv(t23 @ t12)]
+    scans = []
+    for i, cloud in enumerate(views.clouds):
+        path = folder / f"scan{i + 1}.ply"
+        mtpcr.write_ply(path, cloud)
+        scans.append(str(path))
+    file = folder / "synthetic.json"
+    file.write_text(
+        json.dumps({"name": "synthetic", "scans": scans, "poses": [p.tolist() for p in poses]})
+    )
+    return file
+
+
+def mtpcr_binary() -> Path:
+    binary = Path(os.environ.get("MTPCR_BIN", REPO_ROOT / "target" / "release" / "mtpcr"))
+    if not binary.is_file():
+        pytest.skip(f"no mtpcr binary at {binary} (cargo build --release, or set MTPCR_BIN)")
+    return binary
+
+
+def test_evaluate_gives_the_records_of_mtpcr_experiment(problem_file, tmp_path):
+    records = mtpcr.evaluate(
+        "accuracy", [problem_file], seeds=[0, 1], variants=["mtpcr-default"], generations=3
+    )
+    assert [(r["variant"], r["problem"], r["seed"]) for r in records] == [
+        ("mtpcr-default", "synthetic", 0),
+        ("mtpcr-default", "synthetic", 1),
+    ]
+    out = tmp_path / "exp"
+    subprocess.run(
+        [
+            str(mtpcr_binary()),
+            "experiment",
+            "accuracy",
+            "--problems",
+            str(problem_file),
+            "--runs",
+            "2",
+            "--generations",
+            "3",
+            "--out",
+            str(out),
+            "--quiet",
+        ],
+        check=True,
+    )
+    lines = [json.loads(line) for line in (out / "runs.jsonl").read_text().splitlines()]
+    cli = {(r["variant"], r["seed"]): r for r in lines}
+    for record in records:
+        other = cli[(record["variant"], record["seed"])]
+        for key in record:
+            if key != "seconds":
+                assert record[key] == other[key], key
+
+
+def test_evaluate_rejects_unknown_suites_and_variants(problem_file):
+    with pytest.raises(ValueError, match="unknown suite `acuracy`"):
+        mtpcr.evaluate("acuracy", [problem_file])
+    with pytest.raises(ValueError, match="no variant `fast`"):
+        mtpcr.evaluate("accuracy", [problem_file], variants=["fast"])
+    stops = mtpcr.evaluate(
+        "accuracy", [problem_file], runs=3, generations=1, on_run=lambda record: False
+    )
+    assert len(stops) == 1, "on_run returning False stops after the first run"
