@@ -46,7 +46,7 @@ pub struct ExperimentArgs {
     /// quality].
     #[arg(long, value_name = "N")]
     pub runs: Option<usize>,
-    /// Problem files, for every suite [default: ../shared/problems/*.json, sorted; the
+    /// Problem files, for every suite [default: the shared data's problems/*.json, sorted; the
     /// sensitivity suites use the paper's Bunny problems among them].
     #[arg(long, value_name = "FILE", num_args = 1..)]
     pub problems: Vec<PathBuf>,
@@ -98,7 +98,14 @@ struct LoadedProblem {
 }
 
 fn default_problems() -> CliResult<Vec<PathBuf>> {
-    let dir = Path::new("../shared/problems");
+    let shared = mtpcr_core::eval::shared::find_shared_dir().ok_or_else(|| {
+        Failure(
+            "no shared data found ($MTPCR_SHARED_DIR, or a shared/ folder beside this one or \
+             an ancestor); pass --problems FILE..."
+                .to_string(),
+        )
+    })?;
+    let dir = &shared.join("problems");
     let entries = std::fs::read_dir(dir).map_err(|e| {
         Failure(format!(
             "{}: cannot list the default problems ({e}); pass --problems FILE...",

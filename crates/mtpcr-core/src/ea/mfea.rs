@@ -1,5 +1,5 @@
 //! The baselines of the paper's Table 4: MFEA (Gupta et al. 2016) and G-MFEA (Ding et al.
-//! 2019), over the same six task losses as MTPCR (DESIGN.md, "Baselines").
+//! 2019), over the same task losses as MTPCR.
 //!
 //! One population of `Kn` members (`K` tasks: two per edge of the view graph, six for the
 //! three-view loop; the numbers below are for `K = 6`) lives in the unified space `[0, 1]^6`,
