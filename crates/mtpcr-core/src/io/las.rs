@@ -1,0 +1,191 @@
+//! ASPRS LAS and LAZ (LASzip-compressed LAS) files, read with the `las` crate (its `laz`
+//! feature decodes LAZ in pure Rust).
+//!
+//! Coordinates come back scaled and offset as the header says (LAS stores integers). Points
+//! are read in chunks, never all at once from the header's count, and that count is checked
+//! against the file's size first.
+
+use crate::cloud::PointCloud;
+use crate::error::{Error, Result};
+use std::io::{Read, Seek};
+use std::path::Path;
+
+/// Points decoded per call into `las` (bounded memory per step).
+const CHUNK: u64 = 1 << 16;
+
+/// LASzip spends a fraction of a bit on a point that repeats its predecessor; 200 points per
+/// byte is far beyond any real file, and a header that claims more is refused before reading.
+const MAX_LAZ_POINTS_PER_BYTE: u64 = 200;
+
+/// Reads the points of a LAS or LAZ file from `source` (`len` bytes long); `path` names it in
+/// errors.
+pub(crate) fn read_las<R: Read + Seek + Send + Sync + 'static>(
+    path: &Path,
+    source: R,
+    len: u64,
+) -> Result<PointCloud> {
+    let las_error = |what: &str, e: las::Error| {
+        let text = e.to_string().lines().collect::<Vec<_>>().join(" ");
+        Error::malformed(path, format!("{what}: {text}"))
+    };
+    let mut reader =
+        las::Reader::new(source).map_err(|e| las_error("not a valid LAS/LAZ file", e))?;
+    let header = reader.header();
+    let declared = header.number_of_points();
+    let format = header.point_format();
+    let record_len = u64::from(format.len());
+    let fits = if format.is_compressed {
+        declared <= len.saturating_mul(MAX_LAZ_POINTS_PER_BYTE)
+    } else {
+        declared
+            .checked_mul(record_len)
+            .is_some_and(|bytes| bytes <= len)
+    };
+    if !fits {
+        return Err(Error::malformed(
+            path,
+            format!(
+                "the header declares {declared} points of {record_len} bytes, more than a file \
+                 of {len} bytes can hold"
+            ),
+        ));
+    }
+    let mut points: Vec<[f64; 3]> =
+        Vec::with_capacity(usize::try_from(declared.min(CHUNK)).unwrap_or(0));
+    while (points.len() as u64) < declared {
+        let want = (declared - points.len() as u64).min(CHUNK);
+        let data = reader.read_points(want).map_err(|e| {
+            las_error(
+                &format!(
+                    "cannot read points {}..{}",
+                    points.len(),
+                    points.len() as u64 + want
+                ),
+                e,
+            )
+        })?;
+        if data.is_empty() {
+            return Err(Error::malformed(
+                path,
+                format!(
+                    "the file ends after {} of the {declared} points the header declares",
+                    points.len()
+                ),
+            ));
+        }
+        points.extend(
+            data.x()
+                .zip(data.y())
+                .zip(data.z())
+                .map(|((x, y), z)| [x, y, z]),
+        );
+    }
+    Ok(PointCloud::new(points))
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+    use las::point::Format;
+    use las::{Builder, Point, Transform, Vector, Writer};
+    use std::io::Cursor;
+
+    /// Writes points as LAS 1.2 point format 1 (LAZ when `compressed`) with a millimetre
+    /// scale and an offset, with the las crate; returns the file's bytes.
+    pub(crate) fn write_las(points: &[[f64; 3]], compressed: bool) -> Vec<u8> {
+        let mut builder = Builder::from((1, 2));
+        builder.point_format = Format::new(1).unwrap();
+        builder.point_format.is_compressed = compressed;
+        builder.transforms = Vector {
+            x: Transform {
+                scale: 0.001,
+                offset: 1000.0,
+            },
+            y: Transform {
+                scale: 0.001,
+                offset: -50.0,
+            },
+            z: Transform {
+                scale: 0.01,
+                offset: 0.0,
+            },
+        };
+        let header = builder.into_header().unwrap();
+        let mut writer = Writer::new(Cursor::new(Vec::new()), header).unwrap();
+        for p in points {
+            writer
+                .write_point(Point {
+                    x: p[0],
+                    y: p[1],
+                    z: p[2],
+                    gps_time: Some(0.0),
+                    ..Default::default()
+                })
+                .unwrap();
+        }
+        writer.into_inner().unwrap().into_inner()
+    }
+
+    pub(crate) fn sample() -> Vec<[f64; 3]> {
+        (0..3000)
+            .map(|i| {
+                let t = i as f64;
+                [
+                    1000.0 + (t * 0.37).sin() * 20.0,
+                    -50.0 + t * 0.013,
+                    (t * 0.1).cos() * 3.0,
+                ]
+            })
+            .collect()
+    }
+
+    fn read(name: &str, bytes: &[u8]) -> Result<PointCloud> {
+        read_las(
+            Path::new(name),
+            Cursor::new(bytes.to_vec()),
+            bytes.len() as u64,
+        )
+    }
+
+    #[test]
+    fn las_and_laz_give_back_the_points_to_the_scale() {
+        let pts = sample();
+        for compressed in [false, true] {
+            let bytes = write_las(&pts, compressed);
+            let cloud = read(if compressed { "a.laz" } else { "a.las" }, &bytes).unwrap();
+            assert_eq!(cloud.len(), pts.len());
+            for (a, b) in cloud.points().iter().zip(&pts) {
+                // Stored as integers of 1 mm (x, y) and 1 cm (z).
+                assert!((a[0] - b[0]).abs() <= 0.0005 + 1e-9, "{a:?} {b:?}");
+                assert!((a[1] - b[1]).abs() <= 0.0005 + 1e-9, "{a:?} {b:?}");
+                assert!((a[2] - b[2]).abs() <= 0.005 + 1e-9, "{a:?} {b:?}");
+            }
+        }
+        let las = read("a.las", &write_las(&pts, false)).unwrap();
+        let laz = read("a.laz", &write_las(&pts, true)).unwrap();
+        assert_eq!(las, laz);
+    }
+
+    #[test]
+    fn broken_files_give_errors_that_name_the_file_and_the_problem() {
+        let pts = sample();
+        let las = write_las(&pts, false);
+        let laz = write_las(&pts, true);
+        // Point count at offset 107 (legacy) in a LAS 1.2 header.
+        let mut lying = las.clone();
+        lying[107..111].copy_from_slice(&u32::MAX.to_le_bytes());
+        let cases: Vec<(&str, Vec<u8>, &str)> = vec![
+            ("head.las", las[..50].to_vec(), "not a valid LAS/LAZ file"),
+            ("short.las", las[..las.len() - 100].to_vec(), "points"),
+            ("count.las", lying, "more than a file of"),
+            ("short.laz", laz[..laz.len() / 2].to_vec(), "a.laz"),
+        ];
+        for (name, bytes, needle) in cases {
+            let needle = needle.replace("a.laz", name);
+            let e = read(name, &bytes).unwrap_err();
+            let msg = e.to_string();
+            assert!(matches!(e, Error::MalformedFile { .. }), "{name}: {msg}");
+            assert!(msg.contains(name) && msg.contains(&needle), "{name}: {msg}");
+        }
+    }
+}
