@@ -7,7 +7,7 @@
 
 use crate::cloud::PointCloud;
 use crate::error::{Error, Result};
-use std::io::{Read, Seek};
+use std::io::{Read, Seek, SeekFrom};
 use std::path::Path;
 
 /// Points decoded per call into `las` (bounded memory per step).
@@ -17,17 +17,71 @@ const CHUNK: u64 = 1 << 16;
 /// byte is far beyond any real file, and a header that claims more is refused before reading.
 const MAX_LAZ_POINTS_PER_BYTE: u64 = 200;
 
+/// Reads a little-endian integer of `N` bytes at `at`; `None` past the end.
+fn read_at<R: Read + Seek, const N: usize>(source: &mut R, at: u64) -> Option<[u8; N]> {
+    let mut buf = [0u8; N];
+    source.seek(SeekFrom::Start(at)).ok()?;
+    source.read_exact(&mut buf).ok()?;
+    Some(buf)
+}
+
+/// The `laz` crate reserves memory for the chunk table's declared number of chunks before it
+/// reads them (16 bytes each, up to 4 G chunks): check that count against the file's size
+/// first. It finds the table as `laz` does: through the offset at the start of the point data,
+/// or the one in the file's last 8 bytes when that one is not past the point data's start.
+/// Anything else that is wrong is left to `las` and `laz` to report.
+fn check_laz_chunk_table<R: Read + Seek>(path: &Path, source: &mut R, len: u64) -> Result<()> {
+    let (Some(offset), Some([format_id])) =
+        (read_at::<R, 4>(source, 96), read_at::<R, 1>(source, 104))
+    else {
+        return Ok(());
+    };
+    if format_id & 0x80 == 0 {
+        return Ok(()); // not compressed
+    }
+    let data_start = u64::from(u32::from_le_bytes(offset));
+    let after = |table: Option<[u8; 8]>| {
+        table
+            .map(i64::from_le_bytes)
+            .and_then(|t| u64::try_from(t).ok())
+            .filter(|&t| t > data_start)
+    };
+    let table = after(read_at::<R, 8>(source, data_start)).or_else(|| {
+        len.checked_sub(8)
+            .and_then(|end| after(read_at::<R, 8>(source, end)))
+    });
+    if let Some(chunks) = table
+        .and_then(|t| read_at::<R, 4>(source, t.saturating_add(4)))
+        .map(u32::from_le_bytes)
+    {
+        if u64::from(chunks) > len {
+            return Err(Error::malformed(
+                path,
+                format!(
+                    "the LAZ chunk table declares {chunks} chunks, more than a file of {len} \
+                     bytes can hold"
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// Reads the points of a LAS or LAZ file from `source` (`len` bytes long); `path` names it in
 /// errors.
 pub(crate) fn read_las<R: Read + Seek + Send + Sync + 'static>(
     path: &Path,
-    source: R,
+    mut source: R,
     len: u64,
 ) -> Result<PointCloud> {
     let las_error = |what: &str, e: las::Error| {
         let text = e.to_string().lines().collect::<Vec<_>>().join(" ");
         Error::malformed(path, format!("{what}: {text}"))
     };
+    check_laz_chunk_table(path, &mut source, len)?;
+    source
+        .seek(SeekFrom::Start(0))
+        .map_err(|e| Error::io(path, e))?;
     let mut reader =
         las::Reader::new(source).map_err(|e| las_error("not a valid LAS/LAZ file", e))?;
     let header = reader.header();
@@ -49,6 +103,24 @@ pub(crate) fn read_las<R: Read + Seek + Send + Sync + 'static>(
                  of {len} bytes can hold"
             ),
         ));
+    }
+    if format.is_compressed {
+        // laz splits each decoded record by the LAZ VLR's item sizes and panics when they do
+        // not add up to the point format's record length: check them first.
+        let vlr = header
+            .laz_vlr()
+            .map_err(|e| las_error("bad LAZ description", e))?;
+        let items: u64 = vlr.items().iter().map(|i| u64::from(i.size())).sum();
+        if items != record_len {
+            return Err(Error::malformed(
+                path,
+                format!(
+                    "the LAZ items add up to {items} bytes per point, but point format {} has \
+                     {record_len}",
+                    format.to_u8().unwrap_or(0)
+                ),
+            ));
+        }
     }
     let mut points: Vec<[f64; 3]> =
         Vec::with_capacity(usize::try_from(declared.min(CHUNK)).unwrap_or(0));
@@ -174,7 +246,17 @@ pub(crate) mod tests {
         // Point count at offset 107 (legacy) in a LAS 1.2 header.
         let mut lying = las.clone();
         lying[107..111].copy_from_slice(&u32::MAX.to_le_bytes());
+        let mut chunks = laz.clone();
+        let data_start = u32::from_le_bytes(laz[96..100].try_into().unwrap()) as usize;
+        let table =
+            i64::from_le_bytes(laz[data_start..data_start + 8].try_into().unwrap()) as usize;
+        chunks[table + 4..table + 8].copy_from_slice(&u32::MAX.to_le_bytes());
         let cases: Vec<(&str, Vec<u8>, &str)> = vec![
+            (
+                "chunks.laz",
+                chunks,
+                "the LAZ chunk table declares 4294967295 chunks",
+            ),
             ("head.las", las[..50].to_vec(), "not a valid LAS/LAZ file"),
             ("short.las", las[..las.len() - 100].to_vec(), "points"),
             ("count.las", lying, "more than a file of"),

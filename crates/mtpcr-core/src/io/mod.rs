@@ -8,6 +8,8 @@
 //! Every reader is strict about malformed files (an error naming the file and the problem,
 //! with the line for text formats) and never allocates more than the file's size justifies.
 
+#[cfg(test)]
+mod corpus;
 mod e57;
 mod las;
 mod pcd;
@@ -307,6 +309,91 @@ pub fn matrix_text(t: &Transform) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn tmp(name: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("mtpcr-io-mod-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        dir.join(name)
+    }
+
+    #[test]
+    fn detect_format_reads_signatures_first_then_extensions() {
+        let cases: [(&str, &[u8], Format); 14] = [
+            ("a.xyz", b"ply\nformat ascii 1.0\n", Format::Ply),
+            ("a", b"ply\r\nformat", Format::Ply),
+            ("a.ply", b"ASTM-E57\x01\x00", Format::E57),
+            ("a.txt", b"LASF\x00\x00", Format::Las),
+            ("a.bin", b"# .PCD v0.7\nVERSION 0.7\n", Format::Pcd),
+            ("a.bin", b"VERSION .7\nFIELDS x y z\n", Format::Pcd),
+            ("a.PLY", b"", Format::Ply),
+            ("a.pcd", b"garbage", Format::Pcd),
+            ("a.E57", b"", Format::E57),
+            ("a.laz", b"", Format::Las),
+            ("a.xyz", b"1 2 3\n", Format::Xyz),
+            ("a.txt", b"1 2 3\n", Format::Xyz),
+            ("a.csv", b"x,y,z\n", Format::Xyz),
+            ("a.pts", b"3\n", Format::Pts),
+        ];
+        for (name, bytes, want) in cases {
+            assert_eq!(detect_format(name, bytes).unwrap(), want, "{name}");
+        }
+        for name in ["scan.obj", "scan"] {
+            let e = detect_format(name, b"\x00\x01").unwrap_err().to_string();
+            assert!(
+                e.contains(name) && e.contains("unknown point-cloud format"),
+                "{e}"
+            );
+            assert!(
+                e.contains("PCD (.pcd)") && e.contains("LAS/LAZ") && e.contains(".pts"),
+                "{e}"
+            );
+        }
+    }
+
+    #[test]
+    fn read_scans_reads_every_format_from_files() {
+        // The corpus' seeds, written to files: the E57 and LAS readers stream from the file.
+        for (name, bytes, counts) in corpus::seeds() {
+            let path = tmp(&format!("file-{name}"));
+            std::fs::write(&path, &bytes).unwrap();
+            let from_file = read_scans(&path).unwrap_or_else(|e| panic!("{name}: {e}"));
+            let from_bytes = read_scans_bytes(&path, &bytes).unwrap();
+            assert_eq!(from_file, from_bytes, "{name}");
+            let got: Vec<usize> = from_file.iter().map(|s| s.cloud.len()).collect();
+            assert_eq!(got, counts, "{name}");
+            if counts.len() == 1 {
+                assert_eq!(read_points(&path).unwrap(), from_file[0].cloud, "{name}");
+                assert_eq!(
+                    from_file[0].name,
+                    format!("file-{name}").rsplit_once('.').unwrap().0
+                );
+                assert!(from_file[0].pose.is_none());
+            }
+        }
+    }
+
+    #[test]
+    fn read_points_refuses_a_file_of_several_scans_and_says_what_to_use() {
+        let path = tmp("several.e57");
+        e57::tests::write_e57(&path, &e57::tests::sample_scans());
+        let scans = read_scans(&path).unwrap();
+        assert_eq!(scans.len(), 3);
+        assert_eq!(
+            scans.iter().map(|s| s.name.as_str()).collect::<Vec<_>>(),
+            ["station A", "station B", "station C"]
+        );
+        assert!(scans[1].pose.is_some() && scans[2].pose.is_none());
+        let e = read_points(&path).unwrap_err().to_string();
+        assert!(
+            e.contains("several.e57") && e.contains("3 scans") && e.contains("read_scans"),
+            "{e}"
+        );
+        let e = read_scans("/nonexistent/nowhere.e57").unwrap_err();
+        assert!(
+            matches!(e, Error::Io { .. }) && e.to_string().contains("nowhere.e57"),
+            "{e}"
+        );
+    }
 
     #[test]
     fn matrix_text_keeps_columns_aligned() {

@@ -200,7 +200,7 @@ pub(crate) fn read_pcd_bytes(path: &Path, bytes: &[u8]) -> Result<PointCloud> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use pcd_rs::{DynRecord, DynWriter, Schema, ValueKind, WriterInit};
 
@@ -211,7 +211,7 @@ mod tests {
     }
 
     /// Writes `points` as x y z (f32) plus an intensity field with pcd-rs.
-    fn write(path: &Path, kind: DataKind, points: &[[f32; 3]]) {
+    pub(crate) fn write_pcd(path: &Path, kind: DataKind, points: &[[f32; 3]]) {
         let schema = Schema::from_iter([
             ("x", ValueKind::F32, 1),
             ("y", ValueKind::F32, 1),
@@ -240,7 +240,7 @@ mod tests {
         writer.finish().unwrap();
     }
 
-    fn sample() -> Vec<[f32; 3]> {
+    pub(crate) fn sample() -> Vec<[f32; 3]> {
         (0..500)
             .map(|i| {
                 let t = i as f32 * 0.37;
@@ -266,7 +266,7 @@ mod tests {
             ("c.pcd", DataKind::BinaryCompressed),
         ] {
             let path = tmp(name);
-            write(&path, kind, &pts);
+            write_pcd(&path, kind, &pts);
             let bytes = std::fs::read(&path).unwrap();
             let cloud = read_pcd_bytes(&path, &bytes).unwrap();
             if kind == DataKind::Ascii {
@@ -295,8 +295,9 @@ mod tests {
         assert_eq!(c.points(), &[[0.1, 0.2, 0.3], [-1e300, 2.0, 3.0]]);
     }
 
-    #[test]
-    fn malformed_files_give_errors_that_name_the_file_and_the_problem() {
+    /// Malformed PCD files, each with a piece of the message it must give. Shared with the
+    /// regression corpus.
+    pub(crate) fn malformed_cases() -> Vec<(&'static str, Vec<u8>, &'static str)> {
         let head = |fields: &str, points: u64, data: &str| {
             format!(
                 "VERSION 0.7\nFIELDS {fields}\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH {points}\n\
@@ -353,7 +354,12 @@ mod tests {
                 "line 10: invalid float literal",
             ),
         ];
-        for (name, bytes, needle) in cases {
+        cases
+    }
+
+    #[test]
+    fn malformed_files_give_errors_that_name_the_file_and_the_problem() {
+        for (name, bytes, needle) in malformed_cases() {
             let e = read_pcd_bytes(Path::new(name), &bytes).unwrap_err();
             let msg = e.to_string();
             assert!(matches!(e, Error::MalformedFile { .. }), "{name}: {msg}");

@@ -653,7 +653,7 @@ pub fn write_ply(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use std::path::PathBuf;
 
@@ -663,7 +663,7 @@ mod tests {
         dir.join(name)
     }
 
-    const STANFORD: &str =
+    pub(crate) const STANFORD: &str =
         "ply\nformat ascii 1.0\nobj_info num_cols 2\nbye\nbye\nelement vertex 3\n\
         property float x\nproperty float y\nproperty float z\nelement range_grid 4\n\
         property list uchar int vertex_indices\nend_header\n\

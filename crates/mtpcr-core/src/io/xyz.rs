@@ -148,7 +148,7 @@ pub(crate) fn read_xyz_bytes(path: &Path, bytes: &[u8], pts: bool) -> Result<Poi
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     fn read(name: &str, text: &str, pts: bool) -> Result<PointCloud> {
@@ -183,9 +183,10 @@ mod tests {
         );
     }
 
-    #[test]
-    fn errors_name_the_file_the_line_and_the_problem() {
-        let cases: [(&str, &str, bool, &str); 7] = [
+    /// Malformed XYZ/PTS files (name, text, is PTS, a piece of the message). Shared with the
+    /// regression corpus.
+    pub(crate) fn malformed_cases() -> Vec<(&'static str, &'static str, bool, &'static str)> {
+        vec![
             (
                 "short.xyz",
                 "1 2 3\n4 5\n",
@@ -228,8 +229,12 @@ mod tests {
                 true,
                 "ends after 1 of the 3 points declared on line 2",
             ),
-        ];
-        for (name, text, pts, needle) in cases {
+        ]
+    }
+
+    #[test]
+    fn errors_name_the_file_the_line_and_the_problem() {
+        for (name, text, pts, needle) in malformed_cases() {
             let e = read(name, text, pts).unwrap_err();
             let msg = e.to_string();
             assert!(matches!(e, Error::MalformedFile { .. }), "{name}: {msg}");
