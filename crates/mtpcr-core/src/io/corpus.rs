@@ -7,10 +7,13 @@
 
 use super::*;
 
+/// A fresh temporary file name: tests call [`seeds`] concurrently.
 fn tmp(name: &str) -> PathBuf {
+    static CALLS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     let dir = std::env::temp_dir().join(format!("mtpcr-io-corpus-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
+    dir.join(format!("{call}-{name}"))
 }
 
 /// Valid files: name (its extension matters for text formats), bytes, points per scan.
@@ -115,6 +118,15 @@ pub(crate) fn malformed() -> Vec<(String, Vec<u8>)> {
     let table = i64::from_le_bytes(laz[data_start..data_start + 8].try_into().unwrap()) as usize;
     chunks[table + 4..table + 8].copy_from_slice(&u32::MAX.to_le_bytes());
     out.push(("chunks.laz".into(), chunks));
+    // Found by the fuzzer: LAZ with variable-size chunks (chunk size u32::MAX in the LASzip
+    // record, at offset 281 + 12 here) whose chunk table does not cover the points made laz
+    // index out of bounds; and the same with the point-wise (unchunked) compressor made it
+    // reach its "no chunk table" panic.
+    let mut variable = laz.clone();
+    variable[293..297].copy_from_slice(&u32::MAX.to_le_bytes());
+    out.push(("variable.laz".into(), variable.clone()));
+    variable[281..283].copy_from_slice(&1u16.to_le_bytes());
+    out.push(("variable-pointwise.laz".into(), variable));
     out.push(("unknown.bin".into(), b"\x00\x01 no signature".to_vec()));
     out.push(("noext".into(), b"1 2 3\n".to_vec()));
     out

@@ -67,6 +67,83 @@ fn check_laz_chunk_table<R: Read + Seek>(path: &Path, source: &mut R, len: u64) 
     Ok(())
 }
 
+/// Checks what `laz` 0.13 trusts without checking (it panics otherwise): that the LAZ items
+/// add up to the point record's length, and, for variable-size chunks, that the compressor
+/// is a chunked one and that the chunk table covers every declared point.
+fn check_laz<R: Read + Seek>(
+    path: &Path,
+    header: &las::Header,
+    source: &mut R,
+    declared: u64,
+) -> Result<()> {
+    let format = header.point_format();
+    let record_len = u64::from(format.len());
+    let vlr = header
+        .laz_vlr()
+        .map_err(|e| Error::malformed(path, format!("bad LAZ description: {}", one_line(&e))))?;
+    let items: u64 = vlr.items().iter().map(|i| u64::from(i.size())).sum();
+    if items != record_len {
+        return Err(Error::malformed(
+            path,
+            format!(
+                "the LAZ items add up to {items} bytes per point, but point format {} has \
+                 {record_len}",
+                format.to_u8().unwrap_or(0)
+            ),
+        ));
+    }
+    if vlr.uses_variable_size_chunks() {
+        // The compressor type is the LASzip record's first u16 (1: point-wise, unchunked).
+        let compressor = header
+            .vlrs()
+            .iter()
+            .find(|v| las::laz::is_laszip_vlr(v))
+            .and_then(|v| v.data.get(0..2))
+            .map(|b| u16::from_le_bytes([b[0], b[1]]));
+        if compressor == Some(1) {
+            return Err(Error::malformed(
+                path,
+                "the LAZ description asks for variable-size chunks without chunks",
+            ));
+        }
+        let data_start = read_at::<R, 4>(source, 96).map(u32::from_le_bytes);
+        let table = data_start
+            .and_then(|start| source.seek(SeekFrom::Start(u64::from(start))).ok())
+            .ok_or_else(|| Error::malformed(path, "the LAZ point data is missing"))
+            .and_then(|_| {
+                laz::laszip::ChunkTable::read_from(&mut *source, &vlr).map_err(|e| {
+                    Error::malformed(
+                        path,
+                        format!(
+                            "variable-size LAZ chunks need a readable chunk table: {}",
+                            one_line(&e)
+                        ),
+                    )
+                })
+            })?;
+        let covered = table
+            .as_ref()
+            .iter()
+            .fold(0u64, |sum, c| sum.saturating_add(c.point_count));
+        if covered < declared || table.as_ref().iter().any(|c| c.point_count == 0) {
+            return Err(Error::malformed(
+                path,
+                format!(
+                    "the LAZ chunk table covers {covered} points in {} chunks, but the header \
+                     declares {declared}",
+                    table.len()
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// An error's text on one line.
+fn one_line(e: &dyn std::fmt::Display) -> String {
+    e.to_string().lines().collect::<Vec<_>>().join(" ")
+}
+
 /// Reads the points of a LAS or LAZ file from `source` (`len` bytes long); `path` names it in
 /// errors.
 pub(crate) fn read_las<R: Read + Seek + Send + Sync + 'static>(
@@ -74,17 +151,19 @@ pub(crate) fn read_las<R: Read + Seek + Send + Sync + 'static>(
     mut source: R,
     len: u64,
 ) -> Result<PointCloud> {
-    let las_error = |what: &str, e: las::Error| {
-        let text = e.to_string().lines().collect::<Vec<_>>().join(" ");
-        Error::malformed(path, format!("{what}: {text}"))
+    let las_error =
+        |what: &str, e: las::Error| Error::malformed(path, format!("{what}: {}", one_line(&e)));
+    let rewind = |source: &mut R| {
+        source
+            .seek(SeekFrom::Start(0))
+            .map(|_| ())
+            .map_err(|e| Error::io(path, e))
     };
+    // The header's claims are checked before las and laz act on them.
     check_laz_chunk_table(path, &mut source, len)?;
-    source
-        .seek(SeekFrom::Start(0))
-        .map_err(|e| Error::io(path, e))?;
-    let mut reader =
-        las::Reader::new(source).map_err(|e| las_error("not a valid LAS/LAZ file", e))?;
-    let header = reader.header();
+    rewind(&mut source)?;
+    let header =
+        las::Header::new(&mut source).map_err(|e| las_error("not a valid LAS/LAZ file", e))?;
     let declared = header.number_of_points();
     let format = header.point_format();
     let record_len = u64::from(format.len());
@@ -105,23 +184,11 @@ pub(crate) fn read_las<R: Read + Seek + Send + Sync + 'static>(
         ));
     }
     if format.is_compressed {
-        // laz splits each decoded record by the LAZ VLR's item sizes and panics when they do
-        // not add up to the point format's record length: check them first.
-        let vlr = header
-            .laz_vlr()
-            .map_err(|e| las_error("bad LAZ description", e))?;
-        let items: u64 = vlr.items().iter().map(|i| u64::from(i.size())).sum();
-        if items != record_len {
-            return Err(Error::malformed(
-                path,
-                format!(
-                    "the LAZ items add up to {items} bytes per point, but point format {} has \
-                     {record_len}",
-                    format.to_u8().unwrap_or(0)
-                ),
-            ));
-        }
+        check_laz(path, &header, &mut source, declared)?;
     }
+    rewind(&mut source)?;
+    let mut reader =
+        las::Reader::new(source).map_err(|e| las_error("not a valid LAS/LAZ file", e))?;
     let mut points: Vec<[f64; 3]> =
         Vec::with_capacity(usize::try_from(declared.min(CHUNK)).unwrap_or(0));
     while (points.len() as u64) < declared {
