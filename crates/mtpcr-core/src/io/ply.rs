@@ -571,6 +571,11 @@ fn read_binary(
     let mut reader = Reader::new(Cursor::new(&bytes[header.data_start..]));
     for element in &header.elements[..=vertex_index] {
         let def = &element.def;
+        if def.properties.is_empty() {
+            // Rows of no bytes: nothing to read, however many (found by fuzzing: ply-rs-bw
+            // would build one empty row per count, gigabytes for a count of 10^8).
+            continue;
+        }
         let rows = parser
             .read_payload_for_element(&mut reader, def, &ply_header)
             .map_err(|e| {
@@ -716,6 +721,18 @@ pub(crate) mod tests {
         bytes.extend_from_slice(&(-3i16).to_be_bytes());
         let c = read_ply_bytes(Path::new("be.ply"), &bytes).unwrap();
         assert_eq!(c.points(), &[[-3.0, -70000.0, -2.5]]);
+    }
+
+    #[test]
+    fn a_huge_binary_element_without_properties_costs_nothing() {
+        let mut bytes = b"ply\nformat binary_little_endian 1.0\nelement nothing 4000000000000\n\
+            element vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n"
+            .to_vec();
+        for v in [1.0f32, 2.0, 3.0] {
+            bytes.extend_from_slice(&v.to_le_bytes());
+        }
+        let c = read_ply_bytes(Path::new("nothing.ply"), &bytes).unwrap();
+        assert_eq!(c.points(), &[[1.0, 2.0, 3.0]]);
     }
 
     #[test]
