@@ -3,7 +3,14 @@
 //!
 //! Coordinates come back scaled and offset as the header says (LAS stores integers). Points
 //! are read in chunks, never all at once from the header's count, and that count is checked
-//! against the file's size first.
+//! against the file's size first. `laz` 0.13 trusts parts of the LAZ header that fuzzing
+//! showed can crash it (a chunk count that reserves gigabytes, item sizes that do not match
+//! the record, a chunk table that does not cover the points): they are checked here first.
+//!
+//! Known limit, not fixable outside `laz` 0.13: its GPS-time decoder recurses once per
+//! "switch sequence" symbol, and corrupt LAZ data can produce such symbols almost without
+//! consuming input, so a corrupt LAZ file can overflow the stack (the process aborts). Valid
+//! files and LAS (uncompressed) files are not affected.
 
 use crate::cloud::PointCloud;
 use crate::error::{Error, Result};

@@ -324,7 +324,10 @@ fn parse_header(path: &Path, bytes: &[u8]) -> Result<PlyHeader> {
 }
 
 /// Reads the `vertex` element's `x y z` of a PLY file (ASCII, binary little or big endian;
-/// any scalar type). Other elements and properties are ignored.
+/// any scalar type). Values of other properties and elements are not kept, but in ASCII files
+/// every row of every element must match the header (no missing or extra values, nothing but
+/// white space after the last row). Header lines with unknown keywords (Stanford's `bye`) are
+/// skipped; errors give the line of the file where there is one.
 pub fn read_ply(path: impl AsRef<Path>) -> Result<PointCloud> {
     let path = path.as_ref();
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
