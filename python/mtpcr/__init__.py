@@ -36,6 +36,8 @@ from ._mtpcr import (
     find_shared_dir,
     load_problem,
     read_ply,
+    read_points,
+    read_scans,
     register,
     write_ply,
 )
@@ -51,6 +53,8 @@ __all__ = [
     "find_shared_dir",
     "load_problem",
     "read_ply",
+    "read_points",
+    "read_scans",
     "register",
     "write_ply",
 ]

@@ -285,6 +285,14 @@ def register(
 def read_ply(path: _Path) -> NDArray[np.float64]:
     """Reads a PLY file's vertex ``x y z`` as an (N, 3) float64 array."""
 
+def read_points(path: _Path) -> NDArray[np.float64]:
+    """Reads the one scan of a PLY, PCD, E57, LAS/LAZ, XYZ/TXT/CSV or PTS file as an (N, 3)
+    float64 array (format told by content, then extension)."""
+
+def read_scans(path: _Path) -> list[dict[str, Any]]:
+    """Reads every scan of a file (an E57 file may hold several): dicts with ``name``,
+    ``points`` ((N, 3) float64) and ``pose`` (4x4 stored with an E57 scan, else None)."""
+
 def write_ply(path: _Path, points: ArrayLike, colors: ArrayLike | None = None) -> None:
     """Writes points (and optional (N, 3) uint8 colours) as a binary PLY file."""
 

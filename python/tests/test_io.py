@@ -108,3 +108,43 @@ def test_load_problem_resolves_scans_and_ground_truth(tmp_path):
     # The scans do not exist: reading them is an OSError.
     with pytest.raises(FileNotFoundError):
         p.read_scans()
+
+
+def test_read_points_reads_other_formats_and_objects_with_points_are_clouds(tmp_path):
+    """XYZ text is read like PLY; an object with ``.points`` (an Open3D PointCloud, say) is a
+    cloud as it is."""
+    rng = np.random.default_rng(3)
+    points = rng.normal(size=(50, 3))
+    xyz = tmp_path / "scan.xyz"
+    np.savetxt(xyz, points)
+    np.testing.assert_allclose(mtpcr.read_points(xyz), points, rtol=1e-15)
+    ply = tmp_path / "scan.ply"
+    mtpcr.write_ply(ply, points)
+    scans = mtpcr.read_scans(ply)
+    assert len(scans) == 1 and scans[0]["name"] == "scan" and scans[0]["pose"] is None
+    np.testing.assert_array_equal(scans[0]["points"], points)
+
+    class FakeO3dCloud:
+        def __init__(self, p):
+            self.points = p
+
+    clouds = [FakeO3dCloud(points), FakeO3dCloud(points + [0.01, 0, 0])]
+    r = mtpcr.register(*clouds, seed=1, population_size=8, generations=1, restarts=1)
+    assert r.transforms.shape == (1, 4, 4)
+    with pytest.raises(ValueError, match="cloud1 must be"):
+        mtpcr.register(object(), points)
+    with pytest.raises(ValueError, match="not a"):
+        bad = tmp_path / "bad.xyz"
+        bad.write_text("1 2 3\n4 five 6\n")
+        mtpcr.read_points(bad)
+
+
+def test_open3d_point_clouds_are_accepted_as_they_are():
+    o3d = pytest.importorskip("open3d", reason="open3d is not installed (pip install open3d)")
+    rng = np.random.default_rng(4)
+    points = rng.normal(size=(400, 3))
+    a = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+    b = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points[::2]))
+    c = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points[1::2]))
+    r = mtpcr.register(a, b, c, seed=1, population_size=8, generations=1, restarts=1)
+    assert r.transforms.shape == (3, 4, 4)

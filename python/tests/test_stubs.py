@@ -116,7 +116,16 @@ def test_config_property_docs_are_the_rust_field_docs(stub):
 
 @pytest.mark.parametrize(
     "name",
-    ["register", "read_ply", "write_ply", "load_problem", "evaluate", "find_shared_dir"],
+    [
+        "register",
+        "read_ply",
+        "read_points",
+        "read_scans",
+        "write_ply",
+        "load_problem",
+        "evaluate",
+        "find_shared_dir",
+    ],
 )
 def test_function_signatures_match(stub, name):
     runtime = inspect.signature(getattr(_mtpcr, name))

@@ -15,7 +15,7 @@ use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 use error::{outln, CliResult, Failure};
 use mtpcr_core::eval::problem::Problem;
 use mtpcr_core::eval::{mean_std, run_moved, score};
-use mtpcr_core::io::read_ply;
+use mtpcr_core::io::read_scans;
 use mtpcr_core::{synthetic, Config, PointCloud, MIN_POINTS};
 use settings::RunArgs;
 use std::path::{Path, PathBuf};
@@ -168,17 +168,29 @@ fn draw_seed() -> u64 {
         & 0xffff_ffff
 }
 
-fn read_clouds(paths: &[PathBuf], quiet: bool) -> CliResult<Vec<PointCloud>> {
+/// Reads every scan of every file (an E57 file may hold several), validated; returns the
+/// clouds and a label per cloud (the file, and the scan's name when a file holds several).
+fn read_clouds(paths: &[PathBuf], quiet: bool) -> CliResult<(Vec<PointCloud>, Vec<String>)> {
     let mut clouds = Vec::with_capacity(paths.len());
+    let mut labels = Vec::with_capacity(paths.len());
     for p in paths {
-        let c = read_ply(p)?;
-        c.validate(&p.display().to_string(), MIN_POINTS)?;
-        if !quiet {
-            eprintln!("read {}: {} points", p.display(), c.len());
+        let scans = read_scans(p)?;
+        let several = scans.len() > 1;
+        for scan in scans {
+            let label = if several {
+                format!("{} [{}]", p.display(), scan.name)
+            } else {
+                p.display().to_string()
+            };
+            scan.cloud.validate(&label, MIN_POINTS)?;
+            if !quiet {
+                eprintln!("read {label}: {} points", scan.cloud.len());
+            }
+            clouds.push(scan.cloud);
+            labels.push(label);
         }
-        clouds.push(c);
     }
-    Ok(clouds)
+    Ok((clouds, labels))
 }
 
 fn register_files(
@@ -192,7 +204,7 @@ fn register_files(
     config.seed = Some(config.seed.unwrap_or_else(draw_seed));
     // The folder is checked before the (possibly long) reading.
     let dir = output::prepare_output(output, inputs, force)?;
-    let clouds = match read_clouds(inputs, run.quiet) {
+    let (clouds, labels) = match read_clouds(inputs, run.quiet) {
         Ok(c) => c,
         Err(e) => {
             dir.discard_if_unused();
@@ -212,6 +224,7 @@ fn register_files(
     let help = settings::field_help();
     let record = output::RunRecord {
         inputs,
+        labels: &labels,
         clouds: &clouds,
         config: &config,
         result: &result,

@@ -162,6 +162,8 @@ fn check_output(dir: &Path, inputs: &[PathBuf]) -> CliResult<()> {
 pub struct RunRecord<'a> {
     /// The input files, in the order given.
     pub inputs: &'a [PathBuf],
+    /// One label per cloud (its file, and the scan's name when a file holds several).
+    pub labels: &'a [String],
     /// The clouds as read.
     pub clouds: &'a [PointCloud],
     /// The settings of the run (its seed is filled in from the result).
@@ -213,6 +215,7 @@ pub fn result_json(rec: &RunRecord<'_>) -> serde_json::Value {
     serde_json::json!({
         "mtpcr_version": env!("CARGO_PKG_VERSION"),
         "inputs": rec.inputs.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
+        "clouds": rec.labels,
         "points": rec.clouds.iter().map(PointCloud::len).collect::<Vec<_>>(),
         "convention": CONVENTION,
         "completed": r.completed,
@@ -240,8 +243,8 @@ pub fn result_json(rec: &RunRecord<'_>) -> serde_json::Value {
 /// The content of `transforms.txt`.
 pub fn transforms_text(rec: &RunRecord<'_>) -> String {
     let mut s = format!("# {CONVENTION}.\n");
-    for (i, p) in rec.inputs.iter().enumerate() {
-        s.push_str(&format!("# cloud {}: {}\n", i + 1, p.display()));
+    for (i, label) in rec.labels.iter().enumerate() {
+        s.push_str(&format!("# cloud {}: {label}\n", i + 1));
     }
     for (e, name) in rec.result.edges.iter().zip(edge_names(rec.result)) {
         s.push_str(&format!(
@@ -304,15 +307,15 @@ pub fn write_results(dir: &Path, rec: &RunRecord<'_>) -> CliResult<Vec<PathBuf>>
     )?;
 
     let labels: Vec<String> = rec
-        .inputs
+        .labels
         .iter()
         .enumerate()
-        .map(|(i, input)| {
-            let name = input.file_name().map_or_else(
-                || input.display().to_string(),
-                |n| n.to_string_lossy().into_owned(),
-            );
-            format!("cloud {}: {name}", i + 1)
+        .map(|(i, label)| {
+            // The file name without its folder (and the scan's name, if any).
+            let short = std::path::Path::new(label)
+                .file_name()
+                .map_or_else(|| label.clone(), |n| n.to_string_lossy().into_owned());
+            format!("cloud {}: {short}", i + 1)
         })
         .collect();
     let before: Vec<&[[f64; 3]]> = rec.clouds.iter().map(PointCloud::points).collect();

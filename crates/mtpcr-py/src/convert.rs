@@ -58,9 +58,24 @@ fn type_name(obj: &Bound<'_, PyAny>) -> String {
 }
 
 /// Anything numpy can view as an `(N, 3)` array of numbers (any float or int dtype, C or
-/// Fortran order, nested lists), as points. Shape errors name `name`.
+/// Fortran order, nested lists), or an object with such a `.points` attribute (an Open3D
+/// `PointCloud`, say), as points. Shape errors name `name`.
 pub(crate) fn points_from_py(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<[f64; 3]>> {
-    let array = as_numpy(obj, Some("float64"), name, "an (N, 3) array of numbers")?;
+    // Arrays and lists are taken as they are; anything else with `.points` gives those.
+    let is_array_like = obj.hasattr("__array__")?
+        || obj.is_instance_of::<pyo3::types::PyList>()
+        || obj.is_instance_of::<pyo3::types::PyTuple>();
+    let source = if !is_array_like && obj.hasattr("points")? {
+        obj.getattr("points")?
+    } else {
+        obj.clone()
+    };
+    let array = as_numpy(
+        &source,
+        Some("float64"),
+        name,
+        "an (N, 3) array of numbers (or an object with one as `.points`)",
+    )?;
     let array = array.cast_into::<PyArrayDyn<f64>>()?;
     let shape = array.shape();
     if shape.len() != 2 || shape[1] != 3 {

@@ -1,12 +1,14 @@
 //! PLY files and problem files.
 
-use crate::convert::{colors_from_py, points_from_py, points_to_py, transforms_to_py};
+use crate::convert::{
+    colors_from_py, points_from_py, points_to_py, transform_to_py, transforms_to_py,
+};
 use crate::errors::to_py;
 use mtpcr_core::eval::problem::Problem;
 use mtpcr_core::io;
 use numpy::{PyArray2, PyArray3};
 use pyo3::prelude::*;
-use pyo3::types::PyTuple;
+use pyo3::types::{PyDict, PyTuple};
 use std::path::{Path, PathBuf};
 
 fn path_text(path: &Path) -> String {
@@ -22,6 +24,40 @@ fn path_text(path: &Path) -> String {
 pub(crate) fn read_ply(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, PyArray2<f64>>> {
     let cloud = py.detach(|| io::read_ply(&path)).map_err(to_py)?;
     Ok(points_to_py(py, cloud.points()))
+}
+
+/// Reads the one scan of a point-cloud file as an ``(N, 3)`` float64 array: PLY, PCD
+/// (ascii, binary, binary_compressed), E57, LAS/LAZ, XYZ/TXT/CSV or PTS, told by the file's
+/// content, then its extension. An E57 file with several scans is an error: use
+/// :func:`read_scans`.
+///
+/// Raises ``OSError`` when the file cannot be read and ``ValueError`` when it is malformed.
+#[pyfunction]
+pub(crate) fn read_points(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, PyArray2<f64>>> {
+    let cloud = py.detach(|| io::read_points(&path)).map_err(to_py)?;
+    Ok(points_to_py(py, cloud.points()))
+}
+
+/// Reads every scan of a point-cloud file (the formats of :func:`read_points`; an E57 file
+/// may hold several scans): a list of dicts with ``name`` (str), ``points`` (``(N, 3)``
+/// float64) and ``pose`` (the 4x4 scan-to-file-frame pose stored with an E57 scan, else
+/// ``None``), ready for ``register(*[s["points"] for s in scans])``.
+#[pyfunction]
+pub(crate) fn read_scans(py: Python<'_>, path: PathBuf) -> PyResult<Vec<Bound<'_, PyDict>>> {
+    let scans = py.detach(|| io::read_scans(&path)).map_err(to_py)?;
+    scans
+        .iter()
+        .map(|scan| {
+            let d = PyDict::new(py);
+            d.set_item("name", &scan.name)?;
+            d.set_item("points", points_to_py(py, scan.cloud.points()))?;
+            match &scan.pose {
+                Some(pose) => d.set_item("pose", transform_to_py(py, pose))?,
+                None => d.set_item("pose", py.None())?,
+            }
+            Ok(d)
+        })
+        .collect()
 }
 
 /// Writes points as a binary little-endian PLY file with double coordinates (created or

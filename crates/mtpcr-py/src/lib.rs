@@ -43,6 +43,8 @@ fn _mtpcr(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<files::PyProblem>()?;
     m.add_function(wrap_pyfunction!(run::register, m)?)?;
     m.add_function(wrap_pyfunction!(files::read_ply, m)?)?;
+    m.add_function(wrap_pyfunction!(files::read_points, m)?)?;
+    m.add_function(wrap_pyfunction!(files::read_scans, m)?)?;
     m.add_function(wrap_pyfunction!(files::write_ply, m)?)?;
     m.add_function(wrap_pyfunction!(files::load_problem, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate::evaluate, m)?)?;

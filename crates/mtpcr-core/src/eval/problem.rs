@@ -4,7 +4,7 @@
 use crate::cloud::PointCloud;
 use crate::error::{Error, Result};
 use crate::graph::ViewGraph;
-use crate::io::read_ply;
+use crate::io::read_points;
 use crate::se3::{is_rigid, nearest_rigid, Transform};
 use std::path::{Path, PathBuf};
 
@@ -103,9 +103,9 @@ impl Problem {
         Ok(self.graph()?.edge_transforms(&self.poses))
     }
 
-    /// Reads the scans.
+    /// Reads the scans (any format of [`crate::io::read_points`]).
     pub fn read_scans(&self) -> Result<Vec<PointCloud>> {
-        self.scans.iter().map(read_ply).collect()
+        self.scans.iter().map(read_points).collect()
     }
 }
 
