@@ -388,12 +388,13 @@ fn features_config_defaults_follow_the_voxel() {
     assert!((pca_diagonal(&moved_pts) - d).abs() < 1e-9 && d > 4.0);
 }
 
-/// The real-data table of the brief: for every pair of the turntable48 triples and of the
-/// six shared problems, the rank of the first candidate within 5 degrees of the truth and
-/// the time. Run with
+/// The real-data table: for every pair of the turntable48 triples (48 and 96 degrees apart)
+/// and of the shared problems, each scan moved by a seeded random motion first, the rank of
+/// the first candidate within 5 degrees of the truth and the time. Run with
 /// `cargo test -p mtpcr-core --release --lib features_real_scans -- --ignored --nocapture`;
-/// `MTPCR_FEATURE_FRACTION` overrides the voxel fraction, `MTPCR_FEATURE_SUITES` the
-/// problem globs (comma separated folders or files).
+/// `MTPCR_FEATURE_SUITES` replaces the problem folders or files (comma separated),
+/// `MTPCR_FEATURE_FRACTION` the voxel fraction, `MTPCR_FEATURE_SEEDS` the seeds (comma
+/// separated; each gives other motions and other RANSAC draws).
 #[test]
 #[ignore = "needs ../shared and /work/problems-gen; prints a table"]
 fn features_real_scans() {
@@ -402,11 +403,13 @@ fn features_real_scans() {
     use std::collections::BTreeMap;
     use std::time::Instant;
 
-    let shared = std::path::Path::new("/work/shared/problems");
-    let generated = std::path::Path::new("/work/problems-gen/turntable48");
     let folders: Vec<std::path::PathBuf> = match std::env::var("MTPCR_FEATURE_SUITES") {
         Ok(s) => s.split(',').map(std::path::PathBuf::from).collect(),
-        Err(_) => vec![generated.to_path_buf(), shared.to_path_buf()],
+        Err(_) => {
+            let mut v = vec![std::path::PathBuf::from("/work/problems-gen/turntable48")];
+            v.extend(crate::eval::shared::find_shared_dir().map(|d| d.join("problems")));
+            v
+        }
     };
     let mut files = Vec::new();
     for f in &folders {
@@ -438,8 +441,17 @@ fn features_real_scans() {
     let mut describe_seconds = Vec::new();
     let mut keypoints = Vec::new();
     println!("problem            pair  type   keypts(s/t)  cands  rank  err_first  secs");
-    for (pi, file) in files.iter().enumerate() {
-        let Ok(problem) = Problem::load(file, None) else {
+    let seeds: Vec<u64> = std::env::var("MTPCR_FEATURE_SEEDS")
+        .unwrap_or("0".into())
+        .split(',')
+        .map(|s| s.parse().unwrap())
+        .collect();
+    let jobs: Vec<(usize, &std::path::PathBuf, u64)> = seeds
+        .iter()
+        .flat_map(|&sd| files.iter().enumerate().map(move |(pi, f)| (pi, f, sd)))
+        .collect();
+    for (pi, file, run_seed) in jobs {
+        let Ok(mut problem) = Problem::load(file, None) else {
             eprintln!("skipping {}: cannot load", file.display());
             continue;
         };
@@ -456,10 +468,14 @@ fn features_real_scans() {
         let graph = problem.graph().unwrap();
         let truth = problem.ground_truth().unwrap();
         let extent = scans.iter().map(|c| c.largest_side()).fold(0.0, f64::max);
-        let motions = random_motions(1000 + pi as u64, extent, scans.len());
+        let motions = random_motions(1000 + pi as u64 + 7919 * run_seed, extent, scans.len());
+        if run_seed > 0 {
+            problem.name = format!("{}#{run_seed}", problem.name);
+        }
         let (clouds, gt) = apply_motions(&scans, &graph, &truth, &motions);
         let refs: Vec<&[[f64; 3]]> = clouds.iter().map(|c| c.points()).collect();
-        let config = FeatureConfig::for_clouds(&refs, fraction).unwrap();
+        let mut config = FeatureConfig::for_clouds(&refs, fraction).unwrap();
+        config.seed = run_seed;
         let features: Vec<Features> = refs
             .iter()
             .map(|c| {
