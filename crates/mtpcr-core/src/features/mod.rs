@@ -332,7 +332,7 @@ pub fn describe(points: &[[f64; 3]], config: &FeatureConfig) -> Result<Features>
 /// [`FeatureConfig::num_candidates`]. Empty when nothing can be matched or verified (too
 /// few keypoints or matches, degenerate geometry). `config` must be the one both features
 /// were described with (its voxel sets the scale of every distance). Fails only on an
-/// invalid `config` or on features whose lengths differ.
+/// invalid `config`, or on features whose lengths differ or that hold a non-finite value.
 pub fn candidates(
     source: &Features,
     target: &Features,
@@ -346,6 +346,13 @@ pub fn candidates(
                 f.points.len(),
                 f.normals.len(),
                 f.descriptors.len()
+            )));
+        }
+        let finite = |v: &[[f64; 3]]| v.iter().flatten().all(|c| c.is_finite());
+        let finite_descriptors = f.descriptors.iter().flatten().all(|c| c.is_finite());
+        if !(finite(&f.points) && finite(&f.normals) && finite_descriptors) {
+            return Err(Error::InvalidInput(format!(
+                "{name} features hold a non-finite value"
             )));
         }
     }

@@ -3,6 +3,7 @@ use super::ransac::{kabsch, rotation_angle_deg};
 use super::*;
 use crate::se3::{decode, random_rigid, rotation_error_deg, translation_error, Rigid};
 use crate::synthetic::three_views;
+use nalgebra::Vector3;
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -106,8 +107,6 @@ fn features_register_a_resampled_copy_rotated_by_60_to_180_degrees() {
     }
 }
 
-use nalgebra::Vector3;
-
 #[test]
 fn features_and_candidates_are_the_same_on_one_and_two_threads() {
     let problem = three_views(4, 6000);
@@ -205,6 +204,9 @@ fn features_of_degenerate_inputs_give_no_candidates() {
     let mut broken = good.clone();
     broken.normals.pop();
     assert!(candidates(&broken, &good, &config).is_err());
+    let mut broken = good.clone();
+    broken.points[3][1] = f64::NAN;
+    assert!(candidates(&good, &broken, &config).is_err());
     let bad = FeatureConfig {
         voxel: 0.0,
         ..config.clone()
@@ -394,7 +396,9 @@ fn features_config_defaults_follow_the_voxel() {
 /// `cargo test -p mtpcr-core --release --lib features_real_scans -- --ignored --nocapture`;
 /// `MTPCR_FEATURE_SUITES` replaces the problem folders or files (comma separated),
 /// `MTPCR_FEATURE_FRACTION` the voxel fraction, `MTPCR_FEATURE_SEEDS` the seeds (comma
-/// separated; each gives other motions and other RANSAC draws).
+/// separated; each gives other motions and other RANSAC draws); with
+/// `MTPCR_FEATURE_ALL_PAIRS` set, every pair of each problem's scans is tried (grouped by the
+/// true rotation between them, rounded to 24 degrees).
 #[test]
 #[ignore = "needs ../shared and /work/problems-gen; prints a table"]
 fn features_real_scans() {
@@ -441,6 +445,7 @@ fn features_real_scans() {
     let mut describe_seconds = Vec::new();
     let mut keypoints = Vec::new();
     println!("problem            pair  type   keypts(s/t)  cands  rank  err_first  secs");
+    let all_pairs = std::env::var("MTPCR_FEATURE_ALL_PAIRS").is_ok();
     let seeds: Vec<u64> = std::env::var("MTPCR_FEATURE_SEEDS")
         .unwrap_or("0".into())
         .split(',')
@@ -486,29 +491,55 @@ fn features_real_scans() {
                 f
             })
             .collect();
-        for (e, edge) in graph.edges().iter().enumerate() {
+        // (source, target, truth, pair type): the graph's edges, or every pair.
+        let pairs: Vec<(usize, usize, Transform, String)> = if all_pairs {
+            let n = clouds.len();
+            (0..n)
+                .flat_map(|i| (i + 1..n).map(move |j| (i, j)))
+                .map(|(i, j)| {
+                    let t = crate::se3::invert_rigid(&problem.poses[j]) * problem.poses[i];
+                    let angle = rotation_error_deg(&t, &Transform::identity());
+                    let gt = motions[j] * t * crate::se3::invert_rigid(&motions[i]);
+                    (
+                        i,
+                        j,
+                        gt,
+                        format!("~{:03.0}deg", (angle / 24.0).round() * 24.0),
+                    )
+                })
+                .collect()
+        } else {
+            graph
+                .edges()
+                .iter()
+                .enumerate()
+                .map(|(e, edge)| {
+                    let kind = match (problem.name.contains("48-k"), e) {
+                        (true, 2) => "96deg",
+                        (true, _) => "48deg",
+                        _ => "shared",
+                    };
+                    (edge.source, edge.target, gt[e], kind.to_string())
+                })
+                .collect()
+        };
+        for (source, target, truth, kind) in pairs {
             let start = Instant::now();
-            let found =
-                candidates(&features[edge.source], &features[edge.target], &config).unwrap();
+            let found = candidates(&features[source], &features[target], &config).unwrap();
             let secs = start.elapsed().as_secs_f64();
             let errs: Vec<f64> = found
                 .iter()
-                .map(|c| rotation_error_deg(&c.t_target_source, &gt[e]))
+                .map(|c| rotation_error_deg(&c.t_target_source, &truth))
                 .collect();
             let rank = errs.iter().position(|&d| d < 5.0).map(|r| r + 1);
-            let kind = if problem.name.contains("48-k") {
-                if e == 2 { "96deg" } else { "48deg" }.to_string()
-            } else {
-                "shared".to_string()
-            };
             println!(
                 "{:<18} {}->{}  {:<6} {:>5}/{:<5}  {:>5}  {:>4}  {:>8.1}  {:.3}",
                 problem.name,
-                edge.source + 1,
-                edge.target + 1,
+                source + 1,
+                target + 1,
                 kind,
-                features[edge.source].len(),
-                features[edge.target].len(),
+                features[source].len(),
+                features[target].len(),
                 found.len(),
                 rank.map_or("none".to_string(), |r| r.to_string()),
                 errs.first().copied().unwrap_or(f64::NAN),
