@@ -306,8 +306,9 @@ impl Features {
 pub struct Candidate {
     /// Maps source points into the target frame (`x_target = T x_source`).
     pub t_target_source: Transform,
-    /// Source keypoints that land within [`FeatureConfig::inlier_distance`] of a target
-    /// keypoint.
+    /// Source keypoints that the pose moves within [`FeatureConfig::inlier_distance`] of
+    /// their nearest target keypoint, the two normals agreeing
+    /// ([`FeatureConfig::max_normal_angle_deg`]). Breaks ties of [`Candidate::matches`].
     pub inliers: usize,
     /// `inliers` / number of source keypoints (Open3D's fitness).
     pub fitness: f64,
