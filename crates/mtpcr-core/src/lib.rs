@@ -32,6 +32,7 @@ pub mod config;
 mod ea;
 pub mod error;
 pub mod eval;
+pub mod features;
 pub mod graph;
 pub mod io;
 pub mod loss;

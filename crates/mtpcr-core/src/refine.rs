@@ -41,15 +41,16 @@ pub(crate) struct RefineCloud {
 }
 
 /// The least-squares plane of some points.
-struct PlaneFit {
-    centroid: Vector3<f64>,
+pub(crate) struct PlaneFit {
+    pub(crate) centroid: Vector3<f64>,
     /// Unit normal: the covariance's smallest-eigenvalue direction.
-    normal: Vector3<f64>,
+    pub(crate) normal: Vector3<f64>,
     /// Smallest eigenvalue / sum of the eigenvalues: 0 on a plane, 1/3 for a round blob.
-    variation: f64,
+    pub(crate) variation: f64,
 }
 
-fn plane_fit<'a>(points: impl Iterator<Item = &'a [f64; 3]> + Clone) -> PlaneFit {
+/// The least-squares plane of `points` (also used by the feature module's normals).
+pub(crate) fn plane_fit<'a>(points: impl Iterator<Item = &'a [f64; 3]> + Clone) -> PlaneFit {
     let mut mean = Vector3::zeros();
     let mut n = 0usize;
     for p in points.clone() {

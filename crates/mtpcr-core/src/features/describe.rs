@@ -1,0 +1,316 @@
+//! One cloud's keypoints, normals and FPFH descriptors.
+
+use super::{Descriptor, FeatureConfig, Features, NormalOrientation, BINS_PER_FEATURE};
+use super::{DESCRIPTOR_LEN as LEN, MIN_KEYPOINTS};
+use crate::refine::plane_fit;
+use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use nalgebra::{Matrix3, Vector3};
+use rayon::prelude::*;
+use std::num::NonZero;
+
+/// A cloud whose keypoints are thinner than this many voxels in their thinnest direction
+/// (the square root of the smallest covariance eigenvalue) is flat or linear: its features
+/// cannot fix a pose, so it gets none.
+const MIN_THICKNESS_VOXELS: f64 = 1.0;
+
+pub(super) fn describe(points: &[[f64; 3]], config: &FeatureConfig) -> Features {
+    let finite: Vec<[f64; 3]> = points
+        .iter()
+        .filter(|p| p.iter().all(|c| c.is_finite()))
+        .copied()
+        .collect();
+    let keypoints = voxel_downsample(&finite, config.voxel);
+    if keypoints.len() < MIN_KEYPOINTS
+        || thickness(&keypoints) < MIN_THICKNESS_VOXELS * config.voxel
+    {
+        return Features::default();
+    }
+    let Ok(tree) = ImmutableKdTree::<f64, 3>::new_from_slice(&keypoints) else {
+        return Features::default();
+    };
+    let normals = normals(&tree, &keypoints, config);
+    let descriptors = fpfh(&tree, &keypoints, &normals, config);
+    let mut out = Features::default();
+    for ((p, n), d) in keypoints.iter().zip(&normals).zip(descriptors) {
+        if let (Some(n), Some(d)) = (n, d) {
+            out.points.push(*p);
+            out.normals.push(*n);
+            out.descriptors.push(d);
+        }
+    }
+    if out.len() < MIN_KEYPOINTS {
+        return Features::default();
+    }
+    out
+}
+
+/// One point per occupied voxel (cells of side `voxel` from the cloud's lower corner): the
+/// mean of its points, summed in input order; voxels in lexicographic order of their cell.
+pub(super) fn voxel_downsample(points: &[[f64; 3]], voxel: f64) -> Vec<[f64; 3]> {
+    if points.is_empty() {
+        return Vec::new();
+    }
+    let (lo, _) = crate::cloud::bounds(points);
+    // `as` saturates, so even absurd extents cannot overflow (far cells would merge).
+    let cell = |p: &[f64; 3]| -> [i64; 3] {
+        std::array::from_fn(|k| ((p[k] - lo[k]) / voxel).floor() as i64)
+    };
+    let mut keyed: Vec<([i64; 3], u32)> = points
+        .iter()
+        .enumerate()
+        .map(|(i, p)| (cell(p), i as u32))
+        .collect();
+    keyed.sort_unstable();
+    let mut out = Vec::new();
+    let mut start = 0;
+    while start < keyed.len() {
+        let key = keyed[start].0;
+        let mut end = start;
+        let mut sum = [0.0; 3];
+        while end < keyed.len() && keyed[end].0 == key {
+            let p = &points[keyed[end].1 as usize];
+            for k in 0..3 {
+                sum[k] += p[k];
+            }
+            end += 1;
+        }
+        let n = (end - start) as f64;
+        out.push(sum.map(|s| s / n));
+        start = end;
+    }
+    out
+}
+
+/// Square root of the smallest eigenvalue of the points' covariance: their spread in the
+/// thinnest direction.
+fn thickness(points: &[[f64; 3]]) -> f64 {
+    let fit = plane_fit(points.iter());
+    let spread: f64 = points
+        .iter()
+        .map(|p| fit.normal.dot(&(Vector3::from(*p) - fit.centroid)).powi(2))
+        .sum::<f64>()
+        / points.len().max(1) as f64;
+    spread.sqrt()
+}
+
+/// Diagonal of the box of `points` aligned with their principal axes: a size that does not
+/// change when the cloud is moved (0 for fewer than two finite points).
+pub fn pca_diagonal(points: &[[f64; 3]]) -> f64 {
+    let finite: Vec<&[f64; 3]> = points
+        .iter()
+        .filter(|p| p.iter().all(|c| c.is_finite()))
+        .collect();
+    if finite.len() < 2 {
+        return 0.0;
+    }
+    let n = finite.len() as f64;
+    let mean = finite
+        .iter()
+        .fold(Vector3::zeros(), |a, p| a + Vector3::from(**p))
+        / n;
+    let cov = finite.iter().fold(Matrix3::zeros(), |a, p| {
+        let d = Vector3::from(**p) - mean;
+        a + d * d.transpose()
+    }) / n;
+    let axes = cov.symmetric_eigen().eigenvectors;
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for p in &finite {
+        let d = Vector3::from(**p) - mean;
+        for k in 0..3 {
+            let x = axes.column(k).dot(&d);
+            lo[k] = lo[k].min(x);
+            hi[k] = hi[k].max(x);
+        }
+    }
+    (0..3).map(|k| (hi[k] - lo[k]).powi(2)).sum::<f64>().sqrt()
+}
+
+/// The unit normal of each keypoint from a plane fit over its neighbours within
+/// `normal_radius` (at most `normal_max_neighbours`, itself included), signed by
+/// `orientation`; `None` with fewer than three neighbours.
+fn normals(
+    tree: &ImmutableKdTree<f64, 3>,
+    points: &[[f64; 3]],
+    config: &FeatureConfig,
+) -> Vec<Option<[f64; 3]>> {
+    let k = NonZero::new(config.normal_max_neighbours).expect("validated >= 3");
+    let r2 = config.normal_radius * config.normal_radius;
+    let centroid = points
+        .iter()
+        .fold(Vector3::zeros(), |a, p| a + Vector3::from(*p))
+        / points.len() as f64;
+    let sign = match config.orientation {
+        NormalOrientation::AwayFromCentroid => 1.0,
+        NormalOrientation::TowardsCentroid => -1.0,
+    };
+    points
+        .par_iter()
+        .with_min_len(64)
+        .map(|p| {
+            let nn = tree
+                .query(p)
+                .nearest_n::<SquaredEuclidean<f64>>(k)
+                .within(r2)
+                .execute();
+            if nn.len() < 3 {
+                return None;
+            }
+            let mut n = plane_fit(nn.iter().map(|r| &points[r.item as usize])).normal;
+            if !n.iter().all(|c| c.is_finite()) {
+                return None;
+            }
+            if sign * n.dot(&(Vector3::from(*p) - centroid)) < 0.0 {
+                n = -n;
+            }
+            Some([n[0], n[1], n[2]])
+        })
+        .collect()
+}
+
+/// The FPFH of each keypoint with a normal and at least one neighbour with a normal within
+/// `feature_radius` (at most `feature_max_neighbours` points, itself included).
+fn fpfh(
+    tree: &ImmutableKdTree<f64, 3>,
+    points: &[[f64; 3]],
+    normals: &[Option<[f64; 3]>],
+    config: &FeatureConfig,
+) -> Vec<Option<Descriptor>> {
+    let k = NonZero::new(config.feature_max_neighbours).expect("validated >= 1");
+    let r2 = config.feature_radius * config.feature_radius;
+    // Neighbours (index, distance) of each keypoint with a normal, itself excluded.
+    let neighbours: Vec<Vec<(u32, f64)>> = points
+        .par_iter()
+        .with_min_len(64)
+        .enumerate()
+        .map(|(i, p)| {
+            if normals[i].is_none() {
+                return Vec::new();
+            }
+            tree.query(p)
+                .nearest_n::<SquaredEuclidean<f64>>(k)
+                .within(r2)
+                .execute()
+                .iter()
+                .filter(|r| r.item as usize != i && normals[r.item as usize].is_some())
+                .map(|r| (r.item, r.distance.sqrt()))
+                .collect()
+        })
+        .collect();
+    let spfh: Vec<[f64; LEN]> = (0..points.len())
+        .into_par_iter()
+        .with_min_len(64)
+        .map(|i| {
+            let mut h = [0.0; LEN];
+            let Some(ni) = normals[i] else { return h };
+            let list = &neighbours[i];
+            if list.is_empty() {
+                return h;
+            }
+            let step = 100.0 / list.len() as f64;
+            for &(j, _) in list {
+                let j = j as usize;
+                let nj = normals[j].expect("neighbours have normals");
+                let f = pair_features(&points[i], &ni, &points[j], &nj);
+                h[bin(f[0], -std::f64::consts::PI, std::f64::consts::PI)] += step;
+                h[BINS_PER_FEATURE + bin(f[1], -1.0, 1.0)] += step;
+                h[2 * BINS_PER_FEATURE + bin(f[2], -1.0, 1.0)] += step;
+            }
+            h
+        })
+        .collect();
+    (0..points.len())
+        .into_par_iter()
+        .with_min_len(64)
+        .map(|i| {
+            let list = &neighbours[i];
+            if list.is_empty() {
+                return None;
+            }
+            // The neighbours' SPFH weighted by 1 / distance (Rusu et al. 2009), each angle's
+            // histogram normalised to 100 (as Open3D), plus the point's own SPFH.
+            let mut sum = [0.0; LEN];
+            for &(j, d) in list {
+                if d > 0.0 {
+                    let w = 1.0 / d;
+                    for (s, v) in sum.iter_mut().zip(&spfh[j as usize]) {
+                        *s += w * v;
+                    }
+                }
+            }
+            let mut out = [0.0f32; LEN];
+            for f in 0..3 {
+                let block = f * BINS_PER_FEATURE..(f + 1) * BINS_PER_FEATURE;
+                let total: f64 = sum[block.clone()].iter().sum();
+                let scale = if total > 0.0 { 100.0 / total } else { 0.0 };
+                for b in block {
+                    out[b] = (sum[b] * scale + spfh[i][b]) as f32;
+                }
+            }
+            Some(out)
+        })
+        .collect()
+}
+
+/// Differences of direction cosines below this are ties in [`pair_features`].
+const TIE: f64 = 1e-9;
+
+/// Bin of `v` in `[lo, hi]` cut into [`BINS_PER_FEATURE`] equal bins (the ends clamped).
+#[inline]
+fn bin(v: f64, lo: f64, hi: f64) -> usize {
+    let b = (BINS_PER_FEATURE as f64 * (v - lo) / (hi - lo)).floor();
+    if b.is_nan() {
+        BINS_PER_FEATURE / 2
+    } else {
+        (b.max(0.0) as usize).min(BINS_PER_FEATURE - 1)
+    }
+}
+
+/// The Darboux-frame angles of a pair of oriented points, `[theta, alpha, phi]` (as Open3D's
+/// `ComputePairFeatures`): the frame is set at the point whose normal makes the smaller angle
+/// with the line joining them, so the result does not depend on the order of the pair.
+/// Zeros when the points coincide or a normal is along the line.
+pub(super) fn pair_features(
+    p1: &[f64; 3],
+    n1: &[f64; 3],
+    p2: &[f64; 3],
+    n2: &[f64; 3],
+) -> [f64; 3] {
+    let (p1, n1, p2, n2) = (
+        Vector3::from(*p1),
+        Vector3::from(*n1),
+        Vector3::from(*p2),
+        Vector3::from(*n2),
+    );
+    let mut dp = p2 - p1;
+    let d = dp.norm();
+    if d == 0.0 {
+        return [0.0; 3];
+    }
+    let angle1 = n1.dot(&dp) / d;
+    let angle2 = n2.dot(&dp) / d;
+    // The frame goes to the point whose normal is closer to the line (the larger |angle|).
+    // Equal normals (neighbours with the same plane fit) tie exactly, and rounding in another
+    // frame could break the tie either way: a tie goes to the frame giving phi >= 0.
+    let swap = if (angle1.abs() - angle2.abs()).abs() <= TIE {
+        -angle2 > angle1
+    } else {
+        angle1.abs() < angle2.abs()
+    };
+    let (u, n_other, phi) = if swap {
+        dp = -dp;
+        (n2, n1, -angle2)
+    } else {
+        (n1, n2, angle1)
+    };
+    let v = dp.cross(&u);
+    let vn = v.norm();
+    if vn == 0.0 {
+        return [0.0; 3];
+    }
+    let v = v / vn;
+    let w = u.cross(&v);
+    let alpha = v.dot(&n_other);
+    let theta = w.dot(&n_other).atan2(u.dot(&n_other));
+    [theta, alpha, phi]
+}
