@@ -71,6 +71,10 @@ pub struct SettingsArgs {
     pub restarts: Option<usize>,
     #[arg(long, value_name = "N")]
     pub refine_iterations: Option<usize>,
+    #[arg(long, value_name = "N")]
+    pub hypotheses: Option<usize>,
+    #[arg(long, value_name = "RATIO")]
+    pub feature_voxel_ratio: Option<f64>,
     #[arg(long = "threads", visible_alias = "num-threads", value_name = "N")]
     pub num_threads: Option<usize>,
 }
@@ -115,6 +119,8 @@ impl SettingsArgs {
             search,
             restarts,
             refine_iterations,
+            hypotheses,
+            feature_voxel_ratio,
             num_threads,
         );
         set

@@ -120,6 +120,13 @@ settings! {
     /// Iterations of the joint trimmed point-to-plane ICP of all clouds after the evolution,
     /// which closes the loop exactly (beyond the paper); 0 = off, at most 10000. Paper: 0.
     refine_iterations: usize = 0,
+    /// Pose hypotheses per edge from local features (FPFH keypoints matched both ways,
+    /// verified by RANSAC and refined by ICP; beyond the paper), placed in the edge's initial
+    /// populations; 0 = off, at most 100. Paper: 0.
+    hypotheses: usize = 0,
+    /// Spacing of the feature keypoints, as a fraction of the clouds' mean principal-axes
+    /// box diagonal, in (0, 0.5]. Paper: unused.
+    feature_voxel_ratio: f64 = crate::features::DEFAULT_VOXEL_FRACTION,
     /// Worker threads for the loss evaluations; 0 = all cores, at most 4096. The result does
     /// not depend on it.
     num_threads: usize = 0,
@@ -204,6 +211,10 @@ impl Config {
         )?;
         let it = self.refine_iterations;
         check(it <= 10_000, "refine_iterations", "at most 10000", it)?;
+        let h = self.hypotheses;
+        check(h <= 100, "hypotheses", "at most 100", h)?;
+        let v = self.feature_voxel_ratio;
+        check(v > 0.0 && v <= 0.5, "feature_voxel_ratio", "in (0, 0.5]", v)?;
         let th = self.num_threads;
         check(
             th <= 4096,

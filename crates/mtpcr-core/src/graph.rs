@@ -76,6 +76,35 @@ impl ViewGraph {
         })
     }
 
+    /// Any set of edges between `views` views, with no loop searched jointly (each edge is
+    /// its own pair of tasks): the candidate pairs of an unordered scan set.
+    pub fn general(views: usize, edges: Vec<Edge>) -> Result<ViewGraph> {
+        if let Some(e) = edges
+            .iter()
+            .find(|e| e.source >= views || e.target >= views || e.source == e.target)
+        {
+            return Err(Error::InvalidInput(format!(
+                "edge {} -> {} is not between two of the {views} views",
+                e.source, e.target
+            )));
+        }
+        Ok(ViewGraph {
+            views,
+            edges,
+            ring: false,
+        })
+    }
+
+    /// The single edge `source -> target` of this graph's views, as a graph of its own (the
+    /// same view numbers): for searching one pair of a larger set.
+    pub fn single(&self, edge: Edge) -> ViewGraph {
+        ViewGraph {
+            views: self.views,
+            edges: vec![edge],
+            ring: false,
+        }
+    }
+
     /// The graph searched for `views` clouds given in loop order: a pair for two, a ring
     /// for more.
     pub fn for_views(views: usize) -> Result<ViewGraph> {

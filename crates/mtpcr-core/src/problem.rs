@@ -5,6 +5,7 @@
 use crate::cloud::{PointCloud, Sampling};
 use crate::config::Config;
 use crate::error::{Error, Result};
+use crate::features::{candidates, describe, FeatureConfig, Features};
 use crate::graph::ViewGraph;
 use crate::loss::{CappedDistanceLoss, InlierLoss, Loss};
 use crate::refine::RefineCloud;
@@ -31,6 +32,9 @@ pub struct PreparedProblem {
     sampling: Sampling,
     search: SearchMethod,
     aiding_cap_ratio: f64,
+    /// Keypoint features of each centred full-resolution cloud (only with hypotheses).
+    features: Option<(FeatureConfig, Vec<Features>)>,
+    feature_voxel_ratio: f64,
     seconds: f64,
 }
 
@@ -125,6 +129,24 @@ impl PreparedProblem {
                     .collect()
             })
         });
+        let features = if config.hypotheses > 0 {
+            let full: Vec<Vec<[f64; 3]>> = clouds
+                .iter()
+                .zip(&centroids)
+                .map(|(c, m)| c.translated([-m[0], -m[1], -m[2]]).into_points())
+                .collect();
+            let refs: Vec<&[[f64; 3]]> = full.iter().map(Vec::as_slice).collect();
+            let feature_config = FeatureConfig::for_clouds(&refs, config.feature_voxel_ratio)?;
+            let described: Vec<Features> = pool.install(|| {
+                use rayon::prelude::*;
+                full.par_iter()
+                    .map(|c| describe(c, &feature_config))
+                    .collect::<Result<_>>()
+            })?;
+            Some((feature_config, described))
+        } else {
+            None
+        };
         Ok(PreparedProblem {
             graph,
             clouds: indexed,
@@ -136,6 +158,8 @@ impl PreparedProblem {
             sampling: config.sampling,
             search,
             aiding_cap_ratio: config.aiding_cap_ratio,
+            features,
+            feature_voxel_ratio: config.feature_voxel_ratio,
             seconds: start.elapsed().as_secs_f64(),
         })
     }
@@ -210,6 +234,14 @@ impl PreparedProblem {
                 "aiding_cap_ratio",
                 config.aiding_cap_ratio != self.aiding_cap_ratio,
             ),
+            (
+                "hypotheses",
+                (config.hypotheses > 0) != self.features.is_some(),
+            ),
+            (
+                "feature_voxel_ratio",
+                self.features.is_some() && config.feature_voxel_ratio != self.feature_voxel_ratio,
+            ),
         ];
         match differs.iter().find(|(_, d)| *d) {
             Some((field, _)) => Err(Error::config(
@@ -218,6 +250,28 @@ impl PreparedProblem {
             )),
             None => Ok(()),
         }
+    }
+
+    /// Up to `count` pose hypotheses for `source -> target` (centred frames) from the
+    /// clouds' features, best first; empty when the problem was prepared without them or
+    /// nothing matched.
+    pub(crate) fn hypotheses(
+        &self,
+        source: usize,
+        target: usize,
+        count: usize,
+    ) -> Result<Vec<Rigid>> {
+        let Some((config, features)) = &self.features else {
+            return Ok(Vec::new());
+        };
+        let config = FeatureConfig {
+            num_candidates: count,
+            ..config.clone()
+        };
+        Ok(candidates(&features[source], &features[target], &config)?
+            .iter()
+            .map(|c| Rigid::from_matrix(&c.t_target_source))
+            .collect())
     }
 
     /// `t` (cloud `s` -> cloud `d`, original frames) in the centred frames.

@@ -10,7 +10,7 @@ use crate::loss::Loss;
 use crate::problem::{thread_pool, PreparedProblem};
 use crate::refine::refine_poses;
 use crate::result::{EdgeEstimate, Registration};
-use crate::se3::{invert_rigid, Rigid, Transform};
+use crate::se3::{encode, invert_rigid, Rigid, Transform};
 use std::ops::ControlFlow;
 use std::time::Instant;
 
@@ -39,11 +39,21 @@ impl PreparedProblem {
             .collect();
         let mut losses: Vec<&dyn Loss> = aiding.iter().map(|l| l as &dyn Loss).collect();
         losses.extend(original.iter().map(|l| l as &dyn Loss));
+        // Feature hypotheses of every edge, in both of its initial populations.
+        let seeds = graph
+            .edges()
+            .iter()
+            .map(|e| {
+                let found = self.hypotheses(e.source, e.target, config.hypotheses)?;
+                Ok(found.iter().map(|t| encode(&t.to_matrix())).collect())
+            })
+            .collect::<Result<Vec<Vec<_>>>>()?;
         let tasks = Tasks {
             graph,
             losses,
             search_box: SearchBox::for_shift(self.shift()),
             shift: self.shift(),
+            seeds,
         };
         let (out, evaluations, generations_run, completed) =
             search(&tasks, config, seed, &pool, observer);

@@ -94,9 +94,23 @@ pub(crate) struct Tasks<'a> {
     pub search_box: SearchBox,
     /// Translations are divided by this in the unit-free loop term.
     pub shift: f64,
+    /// Individuals placed in each edge's initial populations (both of them) in place of
+    /// the first random ones: pose hypotheses found elsewhere (empty: none).
+    pub seeds: Vec<Vec<Individual>>,
 }
 
 impl Tasks<'_> {
+    /// The initial population of `slot`: `random`, with the edge's seeds in front.
+    pub fn seeded(&self, slot: usize, mut random: Vec<Individual>) -> Vec<Individual> {
+        let edge = self.graph.task(slot).edge;
+        if let Some(seeds) = self.seeds.get(edge) {
+            for (x, s) in random.iter_mut().zip(seeds) {
+                *x = *s;
+            }
+        }
+        random
+    }
+
     /// Number of task slots.
     pub fn count(&self) -> usize {
         self.losses.len()

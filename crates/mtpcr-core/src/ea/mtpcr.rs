@@ -97,7 +97,7 @@ fn run_mtpcr_with(
 
     // Initialisation: populations in slot order, uniform in the box; no loop term.
     let init: Vec<Vec<Individual>> = (0..slots)
-        .map(|_| (0..n).map(|_| sbox.sample(&mut rng)).collect())
+        .map(|s| tasks.seeded(s, (0..n).map(|_| sbox.sample(&mut rng)).collect()))
         .collect();
     let jobs: Vec<(usize, Individual)> = init
         .iter()
@@ -285,6 +285,7 @@ mod tests {
                 losses,
                 search_box: SearchBox::for_shift(0.15),
                 shift: 0.15,
+                seeds: Vec::new(),
             };
             let config = Config {
                 population_size: 30,

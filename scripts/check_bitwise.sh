@@ -1,0 +1,29 @@
+#!/usr/bin/env bash
+# Checks that the engine still gives the transforms recorded in eval/bitwise/before-*.json
+# (captured before the view-graph reshaping of the core): the six shared problems, seeds 0-9,
+# with the paper setting, MFEA, G-MFEA and the earlier default setting. Needs ../shared and a
+# release build; takes about 10 minutes on 2 cores (the default variant 6 of them).
+# Usage: bash scripts/check_bitwise.sh [paper|mfea|gmfea|default ...]   (default: all four)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+cargo build --release -q -p mtpcr-cli
+out=$(mktemp -d)
+status=0
+for variant in "${@:-paper mfea gmfea default}"; do
+  for v in $variant; do
+    case $v in
+      paper) flags=(--paper) ;;
+      mfea) flags=(--paper --method mfea) ;;
+      gmfea) flags=(--paper --method gmfea) ;;
+      # The default setting before feature hypotheses existed.
+      default) flags=(--hypotheses 0) ;;
+      *) echo "unknown variant $v" >&2; exit 2 ;;
+    esac
+    echo "== $v"
+    ./target/release/mtpcr eval ../shared/problems/*.json --runs 10 --seed 0 -q --threads 2 \
+      "${flags[@]}" --json "$out/$v.json" > /dev/null
+    python3 scripts/compare_transforms.py "eval/bitwise/before-$v.json" "$out/$v.json" || status=1
+  done
+done
+rm -rf "$out"
+exit $status
