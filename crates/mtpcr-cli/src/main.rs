@@ -230,7 +230,7 @@ fn register_files(
         result: &result,
         field_help: &help,
     };
-    output::write_results(&dir.path, &record)?;
+    let written = output::write_results(&dir.path, &record)?;
 
     let edges = result.edges.len();
     for (k, e) in result.edges.iter().enumerate() {
@@ -258,6 +258,9 @@ fn register_files(
             result.task_names[k]
         );
     }
+    for u in &result.unplaced {
+        outln!("cloud {} NOT PLACED: {}", u.view + 1, u.reason);
+    }
     let residual = result
         .loop_residual()
         .map_or("none (no loop)".to_string(), |r| format!("{r:.3e}"));
@@ -267,11 +270,7 @@ fn register_files(
         result.seconds,
         result.seed
     );
-    outln!(
-        "wrote {}/ ({})",
-        dir.path.display(),
-        output::OUTPUT_FILES.join(", ")
-    );
+    outln!("wrote {}/ ({})", dir.path.display(), written.join(", "));
     Ok(())
 }
 
@@ -296,9 +295,24 @@ fn eval(
     let bar = progress::run_bar(loaded.len() * runs, run.quiet, "eval");
     let mut report = Vec::new();
     let mut rows = Vec::new();
+    let mut view_rows = Vec::new();
     for problem in &loaded {
         bar.set_message(format!("{}: reading the scans", problem.name));
         let clouds = problem.read_scans()?;
+        if config.order == mtpcr_core::Order::Auto && clouds.len() >= 4 {
+            let runs_json = eval_views(
+                problem,
+                &clouds,
+                runs,
+                seed,
+                &config,
+                &bar,
+                run.quiet,
+                &mut view_rows,
+            )?;
+            report.push(serde_json::json!({ "name": problem.name, "runs": runs_json }));
+            continue;
+        }
         let truth = problem.ground_truth()?;
         let mut run_json = Vec::new();
         let mut all = Vec::new();
@@ -340,6 +354,12 @@ fn eval(
         report.push(serde_json::json!({ "name": problem.name, "runs": run_json }));
     }
     bar.finish_and_clear();
+    if !view_rows.is_empty() {
+        print_view_rows(&view_rows);
+    }
+    if rows.is_empty() {
+        return write_eval_json(json, &config, seed, runs, report);
+    }
     outln!(
         "{:<12} {:>5} {:>9} {:>18} {:>18} {:>10} {:>8}",
         "problem",
@@ -372,6 +392,16 @@ fn eval(
             mean_std(&secs).0
         );
     }
+    write_eval_json(json, &config, seed, runs, report)
+}
+
+fn write_eval_json(
+    json: Option<&Path>,
+    config: &Config,
+    seed: u64,
+    runs: usize,
+    report: Vec<serde_json::Value>,
+) -> CliResult<()> {
     if let Some(out) = json {
         let doc = serde_json::json!({
             "settings": config, "first_seed": seed, "runs": runs, "problems": report,
@@ -382,6 +412,101 @@ fn eval(
         outln!("wrote {}", out.display());
     }
     Ok(())
+}
+
+/// One problem's row of the multi-view table: name, scans, and per run (success, placed
+/// scans, worst and mean rotation error in degrees, seconds).
+type ViewRow = (String, usize, Vec<(bool, usize, f64, f64, f64)>);
+
+/// The runs of a problem of four or more scans in no known order: every scan's pose in the
+/// first scan's frame against the truth (success: all placed and under 1 degree).
+#[allow(clippy::too_many_arguments)]
+fn eval_views(
+    problem: &Problem,
+    clouds: &[PointCloud],
+    runs: usize,
+    seed: u64,
+    config: &Config,
+    bar: &indicatif::ProgressBar,
+    quiet: bool,
+    rows: &mut Vec<ViewRow>,
+) -> CliResult<Vec<serde_json::Value>> {
+    let mut run_json = Vec::new();
+    let mut all = Vec::new();
+    for r in 0..runs {
+        let s = seed.wrapping_add(r as u64);
+        bar.set_message(format!(
+            "{} run {}/{} (seed {s})",
+            problem.name,
+            r + 1,
+            runs
+        ));
+        let (result, scores) =
+            mtpcr_core::eval::run_moved_views(clouds, &problem.poses, config, s)?;
+        bar.inc(1);
+        let placed: Vec<f64> = scores.rot_deg.iter().flatten().copied().collect();
+        let worst = placed.iter().copied().fold(0.0, f64::max);
+        let mean = placed.iter().sum::<f64>() / placed.len().max(1) as f64;
+        if !quiet {
+            bar.suspend(|| {
+                eprintln!(
+                    "{} run {}/{} seed {s}: {} {} of {} scans placed, rotation error worst {worst:.2} mean {mean:.2} deg, {:.2} s",
+                    problem.name,
+                    r + 1,
+                    runs,
+                    if scores.success { "ok  " } else { "FAIL" },
+                    placed.len(),
+                    clouds.len(),
+                    result.seconds
+                )
+            });
+        }
+        run_json.push(serde_json::json!({
+            "seed": s, "success": scores.success, "rot_deg": scores.rot_deg,
+            "trans_rel": scores.trans, "seconds": result.seconds,
+            "unplaced": result.unplaced.iter().map(|u| u.view).collect::<Vec<_>>(),
+            "poses": result.poses.iter().map(|p| p.as_ref().map(mtpcr_core::io::matrix_rows)).collect::<Vec<_>>(),
+        }));
+        all.push((scores.success, placed.len(), worst, mean, result.seconds));
+    }
+    rows.push((problem.name.clone(), clouds.len(), all));
+    Ok(run_json)
+}
+
+fn print_view_rows(rows: &[ViewRow]) {
+    outln!(
+        "{:<14} {:>5} {:>5} {:>9} {:>12} {:>16} {:>15} {:>8}",
+        "problem",
+        "scans",
+        "runs",
+        "successes",
+        "mean placed",
+        "worst rot deg",
+        "mean rot deg",
+        "seconds"
+    );
+    for (name, scans, all) in rows {
+        let ok = all.iter().filter(|r| r.0).count();
+        let placed: Vec<f64> = all.iter().map(|r| r.1 as f64).collect();
+        let worst: Vec<f64> = all.iter().map(|r| r.2).collect();
+        let mean: Vec<f64> = all.iter().map(|r| r.3).collect();
+        let secs: Vec<f64> = all.iter().map(|r| r.4).collect();
+        outln!(
+            "{:<14} {:>5} {:>5} {:>9} {:>12.1} {:>16} {:>15.3} {:>8.2}",
+            name,
+            scans,
+            all.len(),
+            ok,
+            mean_std(&placed).0,
+            format!(
+                "{:.2} (max {:.2})",
+                mean_std(&worst).0,
+                worst.iter().copied().fold(0.0, f64::max)
+            ),
+            mean_std(&mean).0,
+            mean_std(&secs).0
+        );
+    }
 }
 
 fn dump_config(paper: bool) -> CliResult<()> {

@@ -221,8 +221,9 @@ pub fn result_json(rec: &RunRecord<'_>) -> serde_json::Value {
         "completed": r.completed,
         "edges": edges,
         "transforms": transforms,
-        "poses": r.poses.iter().map(matrix_rows).collect::<Vec<_>>(),
-        "poses_note": "poses[k] maps cloud k+1 into the frame of cloud 1",
+        "poses": r.poses.iter().map(|p| p.as_ref().map(matrix_rows)).collect::<Vec<_>>(),
+        "poses_note": "poses[k] maps cloud k+1 into the frame of cloud 1; null when the cloud could not be placed",
+        "unplaced": r.unplaced.iter().map(|u| serde_json::json!({"cloud": u.view + 1, "reason": u.reason})).collect::<Vec<_>>(),
         "loop_residual": r.loop_residual(),
         "best_costs": {
             "original": r.edges.iter().map(|e| e.original_cost).collect::<Vec<_>>(),
@@ -257,8 +258,9 @@ pub fn transforms_text(rec: &RunRecord<'_>) -> String {
     s
 }
 
-/// Writes every file of [`OUTPUT_FILES`] into `dir`; returns their paths.
-pub fn write_results(dir: &Path, rec: &RunRecord<'_>) -> CliResult<Vec<PathBuf>> {
+/// Writes the files of [`OUTPUT_FILES`] into `dir` (all but `convergence.png` when no
+/// evolution ran); returns their names.
+pub fn write_results(dir: &Path, rec: &RunRecord<'_>) -> CliResult<Vec<String>> {
     let path = |name: &str| dir.join(name);
     let json = serde_json::to_string_pretty(&result_json(rec))
         .map_err(|e| Failure(format!("cannot serialise the result: {e}")))?;
@@ -277,11 +279,12 @@ pub fn write_results(dir: &Path, rec: &RunRecord<'_>) -> CliResult<Vec<PathBuf>>
 
     write_file(&path("transforms.txt"), transforms_text(rec).as_bytes())?;
 
+    // Unplaced clouds are left out of the merged cloud and the "after" pictures.
     let moved: Vec<PointCloud> = rec
         .clouds
         .iter()
         .zip(&rec.result.poses)
-        .map(|(c, pose)| c.transformed(pose))
+        .map(|(c, pose)| pose.map_or_else(PointCloud::default, |p| c.transformed(&p)))
         .collect();
     let mut points = Vec::with_capacity(moved.iter().map(PointCloud::len).sum());
     let mut colors = Vec::with_capacity(points.capacity());
@@ -299,12 +302,16 @@ pub fn write_results(dir: &Path, rec: &RunRecord<'_>) -> CliResult<Vec<PathBuf>>
     } else {
         "Best cost per generation of each task".to_string()
     };
-    plots::convergence_png(
-        &rec.result.history,
-        &rec.result.task_names,
-        &title,
-        &path("convergence.png"),
-    )?;
+    // Scans in no known order are placed without an evolution: no convergence to draw.
+    let with_history = !rec.result.history.is_empty();
+    if with_history {
+        plots::convergence_png(
+            &rec.result.history,
+            &rec.result.task_names,
+            &title,
+            &path("convergence.png"),
+        )?;
+    }
 
     let labels: Vec<String> = rec
         .labels
@@ -323,7 +330,11 @@ pub fn write_results(dir: &Path, rec: &RunRecord<'_>) -> CliResult<Vec<PathBuf>>
     plots::views_png(&before, &after, &labels, &path("views.png"))?;
     let html = crate::viewer::viewer_html(&before, &after, &labels, "", "mtpcr: registered scans");
     write_file(&path("view.html"), html.as_bytes())?;
-    Ok(OUTPUT_FILES.iter().map(|n| path(n)).collect())
+    Ok(OUTPUT_FILES
+        .iter()
+        .filter(|n| with_history || **n != "convergence.png")
+        .map(|n| n.to_string())
+        .collect())
 }
 
 #[cfg(test)]

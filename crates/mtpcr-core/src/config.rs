@@ -19,6 +19,19 @@ pub enum Method {
     Gmfea,
 }
 
+/// How the clouds given relate to each other.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Order {
+    /// Two clouds are one pair; three are the paper's loop; four or more are a set in no known
+    /// order (overlapping pairs found, verified around three-scan loops, placed by a spanning
+    /// tree).
+    Auto,
+    /// Three or more clouds given in loop order (cloud k overlaps cloud k + 1, the last
+    /// overlaps the first), searched jointly as one loop.
+    Ring,
+}
+
 /// One field of [`Config`]: its name (the same in Rust, Python, CLI flags and config files)
 /// and its documentation.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -74,6 +87,11 @@ settings! {
     /// The evolutionary algorithm: `mtpcr` (the paper's method), or the baselines `mfea`,
     /// `gmfea`. Paper: mtpcr.
     method: Method = Method::Mtpcr,
+    /// How the clouds relate: `auto` (two: a pair; three: the paper's loop; four or more: a
+    /// set in no known order, its overlapping pairs found and verified around three-scan
+    /// loops) or `ring` (three or more given in loop order, searched jointly as one loop).
+    /// Paper: ring.
+    order: Order = Order::Ring,
     /// Individuals per population (`n`; two populations per edge of the view graph). In
     /// 4..=1000000. Paper: 100.
     population_size: usize = 100,
@@ -141,6 +159,7 @@ impl Default for Config {
     /// ICP refinement of the loop (20 iterations).
     fn default() -> Self {
         Config {
+            order: Order::Auto,
             restarts: 4,
             generations: 30,
             aiding_cap_ratio: 0.3,

@@ -36,6 +36,7 @@ pub mod features;
 pub mod graph;
 pub mod io;
 pub mod loss;
+mod multiview;
 pub mod problem;
 mod refine;
 mod register;
@@ -45,13 +46,13 @@ pub mod search;
 pub mod synthetic;
 
 pub use cloud::{PointCloud, Sampling};
-pub use config::{Config, Method};
+pub use config::{Config, Method, Order};
 pub use ea::{Observer, Progress};
 pub use error::{Error, Result};
 pub use graph::{Edge, ViewGraph};
 pub use problem::{PreparedProblem, MIN_POINTS};
 pub use register::register;
-pub use result::{EdgeEstimate, Registration};
+pub use result::{EdgeEstimate, Registration, Unplaced};
 pub use se3::Transform;
 pub use search::SearchMethod;
 

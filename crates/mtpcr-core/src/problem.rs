@@ -3,7 +3,7 @@
 //! evolution setting.
 
 use crate::cloud::{PointCloud, Sampling};
-use crate::config::Config;
+use crate::config::{Config, Order};
 use crate::error::{Error, Result};
 use crate::features::{candidates, describe, FeatureConfig, Features};
 use crate::graph::ViewGraph;
@@ -39,10 +39,15 @@ pub struct PreparedProblem {
 }
 
 impl PreparedProblem {
-    /// Prepares clouds given in loop order: two clouds are one pair, more form a ring
-    /// ([`ViewGraph::for_views`]).
+    /// Prepares clouds as `config.order` says: two clouds are one pair, three (or more in
+    /// `ring` order) a ring ([`ViewGraph::for_views`]), four or more in `auto` order a set
+    /// with no known edges ([`ViewGraph::general`]).
     pub fn new(clouds: &[PointCloud], config: &Config) -> Result<PreparedProblem> {
-        PreparedProblem::with_graph(clouds, ViewGraph::for_views(clouds.len())?, config)
+        let graph = match (config.order, clouds.len()) {
+            (Order::Auto, n) if n >= 4 => ViewGraph::general(n, Vec::new())?,
+            (_, n) => ViewGraph::for_views(n)?,
+        };
+        PreparedProblem::with_graph(clouds, graph, config)
     }
 
     /// Validates the clouds and the config, downsamples (random sampling uses `config.seed`, or
@@ -216,9 +221,19 @@ impl PreparedProblem {
     /// The aiding loss of an edge.
     pub(crate) fn aiding_loss(&self, edge: usize, two_way: bool) -> CappedDistanceLoss<'_> {
         let e = self.graph.edges()[edge];
+        self.pair_aiding_loss(e.source, e.target, two_way)
+    }
+
+    /// The aiding loss between two prepared clouds.
+    pub(crate) fn pair_aiding_loss(
+        &self,
+        source: usize,
+        target: usize,
+        two_way: bool,
+    ) -> CappedDistanceLoss<'_> {
         CappedDistanceLoss {
-            source: &self.clouds[e.source],
-            target: &self.clouds[e.target],
+            source: &self.clouds[source],
+            target: &self.clouds[target],
             two_way,
         }
     }

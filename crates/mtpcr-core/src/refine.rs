@@ -149,7 +149,7 @@ impl RefineCloud {
 /// the `edges` (pairs of overlapping clouds, each used in both directions). The trimming
 /// distance shrinks linearly from `3 eps` to `eps`. Deterministic for any number of threads.
 pub(crate) fn refine_poses(
-    clouds: &[RefineCloud],
+    clouds: &[&RefineCloud],
     edges: &[Edge],
     mut poses: Vec<Rigid>,
     eps: f64,
@@ -332,6 +332,7 @@ mod tests {
         let clouds = strips(7, 0.02).map(RefineCloud::new);
         let ring = crate::graph::ViewGraph::ring(3).unwrap();
         let (pool, start) = (two_threads(), misaligned_start());
+        let clouds: Vec<&RefineCloud> = clouds.iter().collect();
         let est = refine_poses(&clouds, ring.edges(), start.to_vec(), 0.04, 40, &pool);
         let ident = Rigid::from_individual(&[0.0; 6]).to_matrix();
         let worst = est
@@ -346,6 +347,7 @@ mod tests {
         let clouds = strips(2, 0.0).map(RefineCloud::new);
         let ring = crate::graph::ViewGraph::ring(3).unwrap();
         let (pool, start) = (two_threads(), misaligned_start());
+        let clouds: Vec<&RefineCloud> = clouds.iter().collect();
         let est = refine_poses(&clouds, ring.edges(), start.to_vec(), 0.02, 40, &pool);
         let ident = Rigid::from_individual(&[0.0; 6]).to_matrix();
         for pose in &est {

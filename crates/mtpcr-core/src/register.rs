@@ -7,6 +7,7 @@ use crate::config::{Config, Method};
 use crate::ea::{self, Observer, Outcome, Progress, SearchBox, Tasks};
 use crate::error::{Error, Result};
 use crate::loss::Loss;
+use crate::multiview::register_unordered;
 use crate::problem::{thread_pool, PreparedProblem};
 use crate::refine::refine_poses;
 use crate::result::{EdgeEstimate, Registration};
@@ -28,6 +29,11 @@ impl PreparedProblem {
         let seed = config.seed.unwrap_or_else(rand::random);
         let pool = thread_pool(config.num_threads)?;
         let graph = self.graph();
+        if !graph.is_ring() && graph.edges().len() != 1 {
+            let mut result = register_unordered(self, config, &pool, seed)?;
+            result.seconds = start.elapsed().as_secs_f64();
+            return Ok(result);
+        }
         let edges = graph.edges().len();
         let aiding: Vec<_> = (0..edges)
             .map(|e| self.aiding_loss(e, config.two_way_aiding))
@@ -91,13 +97,18 @@ impl PreparedProblem {
             .collect();
         let poses = match refined_poses {
             Some(w) => (0..graph.views())
-                .map(|v| self.to_original(v, 0, &w[v].to_matrix()))
+                .map(|v| Some(self.to_original(v, 0, &w[v].to_matrix())))
                 .collect(),
-            None => self.poses_without_refinement(&estimates),
+            None => self
+                .poses_without_refinement(&estimates)
+                .into_iter()
+                .map(Some)
+                .collect(),
         };
         Ok(Registration {
             edges: estimates,
             poses,
+            unplaced: Vec::new(),
             task_names: graph.task_names(),
             history: out.history,
             evaluations,
@@ -171,8 +182,9 @@ impl PreparedProblem {
             )
         })?;
         let start = self.consistent_start(pairs);
+        let full: Vec<&_> = full.iter().collect();
         Ok(refine_poses(
-            full,
+            &full,
             self.graph().edges(),
             start,
             self.eps(),

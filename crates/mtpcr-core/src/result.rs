@@ -30,6 +30,15 @@ impl EdgeEstimate {
     }
 }
 
+/// A scan that could not be placed, and why.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Unplaced {
+    /// The scan (numbered from 0).
+    pub view: usize,
+    /// Why, in one sentence.
+    pub reason: String,
+}
+
 /// The result of a registration.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Registration {
@@ -37,7 +46,10 @@ pub struct Registration {
     /// T12, T23, T31).
     pub edges: Vec<EdgeEstimate>,
     /// Each view's transform into view 0's frame (`poses[0]` is the identity); ready to merge.
-    pub poses: Vec<Transform>,
+    /// `None` for a view that could not be placed (see `unplaced`).
+    pub poses: Vec<Option<Transform>>,
+    /// The views that could not be placed, with the reason (only scans in no known order).
+    pub unplaced: Vec<Unplaced>,
     /// The task names, in slot order (the columns of `history`).
     pub task_names: Vec<String>,
     /// Best cost of each task of the kept evolution after its initial population (row 0) and
@@ -70,6 +82,11 @@ impl Registration {
         self.edges.iter().map(|e| e.t_target_source).collect()
     }
 
+    /// The placed views' poses, or `None` when some view is unplaced.
+    pub fn all_poses(&self) -> Option<Vec<Transform>> {
+        self.poses.iter().copied().collect()
+    }
+
     /// `[T12, T23, T31]` when the problem is the three-view loop, else `None`.
     pub fn loop_transforms(&self) -> Option<[Transform; 3]> {
         match self.edges.as_slice() {
@@ -82,24 +99,30 @@ impl Registration {
 
     /// The transform mapping view `source` into view `target`'s frame: the edge's own
     /// estimate when `(source, target)` is an edge (its inverse when reversed), else composed
-    /// from the poses.
-    pub fn t_target_source(&self, target: usize, source: usize) -> Transform {
+    /// from the poses; `None` when a view is unplaced or out of range.
+    pub fn t_target_source(&self, target: usize, source: usize) -> Option<Transform> {
         for e in &self.edges {
             if (e.source, e.target) == (source, target) {
-                return e.t_target_source;
+                return Some(e.t_target_source);
             }
             if (e.source, e.target) == (target, source) {
-                return invert_rigid(&e.t_target_source);
+                return Some(invert_rigid(&e.t_target_source));
             }
         }
-        invert_rigid(&self.poses[target]) * self.poses[source]
+        let (wt, ws) = ((*self.poses.get(target)?)?, (*self.poses.get(source)?)?);
+        Some(invert_rigid(&wt) * ws)
     }
 
     /// `||M_{n-1} ... M_0 - I||_F` for the edges of a ring (how far the transforms are from
     /// closing the loop; ~0 after refinement); `None` without a loop.
     pub fn loop_residual(&self) -> Option<f64> {
         let n = self.edges.len();
-        if n < 3 || self.poses.len() != n {
+        let ring = self
+            .edges
+            .iter()
+            .enumerate()
+            .all(|(k, e)| e.source == k && e.target == (k + 1) % n);
+        if n < 3 || self.poses.len() != n || !ring {
             return None;
         }
         let mut product = self.edges[n - 1].t_target_source;

@@ -111,6 +111,101 @@ pub fn run_moved(
     Ok((result, scores))
 }
 
+/// A multi-view run succeeds when every scan's pose is within this many degrees.
+pub const VIEW_SUCCESS_DEGREES: f64 = 1.0;
+
+/// Errors of every scan's estimated pose (into the first scan's frame) against the truth.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct PoseScores {
+    /// Rotation error of each scan's pose in degrees (`None`: the scan was not placed).
+    pub rot_deg: Vec<Option<f64>>,
+    /// Translation error of each scan's pose as a fraction of the object's diagonal.
+    pub trans: Vec<Option<f64>>,
+    /// Every scan placed and under [`VIEW_SUCCESS_DEGREES`].
+    pub success: bool,
+}
+
+/// Scores estimated poses (scan k into scan 0's frame) against ground-truth scan-to-world
+/// poses; `diagonal` scales the translation errors.
+pub fn score_poses(
+    estimate: &[Option<Transform>],
+    truth: &[Transform],
+    diagonal: f64,
+) -> PoseScores {
+    let base = invert_rigid(&truth[0]);
+    let (rot_deg, trans): (Vec<Option<f64>>, Vec<Option<f64>>) = truth
+        .iter()
+        .enumerate()
+        .map(|(k, pose)| {
+            let gt = base * pose;
+            match estimate.get(k).copied().flatten() {
+                Some(e) => (
+                    Some(rotation_error_deg(&e, &gt)),
+                    Some(translation_error(&e, &gt) / diagonal),
+                ),
+                None => (None, None),
+            }
+        })
+        .unzip();
+    let success = rot_deg
+        .iter()
+        .all(|d| d.is_some_and(|d| d < VIEW_SUCCESS_DEGREES));
+    PoseScores {
+        rot_deg,
+        trans,
+        success,
+    }
+}
+
+/// The bounding-box diagonal of the clouds placed by their scan-to-world poses.
+pub fn object_diagonal(clouds: &[PointCloud], poses: &[Transform]) -> f64 {
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for (c, pose) in clouds.iter().zip(poses) {
+        let (a, b) = c.transformed(pose).bounds();
+        for k in 0..3 {
+            lo[k] = lo[k].min(a[k]);
+            hi[k] = hi[k].max(b[k]);
+        }
+    }
+    (0..3).map(|k| (hi[k] - lo[k]).powi(2)).sum::<f64>().sqrt()
+}
+
+/// One evaluation run of any number of clouds with ground-truth scan-to-world poses: move
+/// each cloud by a seeded random motion (as [`run_moved`]), register with
+/// `config.seed = Some(seed)`, score every scan's pose in the first scan's frame.
+pub fn run_moved_views(
+    clouds: &[PointCloud],
+    poses: &[Transform],
+    config: &Config,
+    seed: u64,
+) -> Result<(Registration, PoseScores)> {
+    let extent = clouds
+        .iter()
+        .map(PointCloud::largest_side)
+        .fold(0.0, f64::max);
+    let motions = random_motions(seed ^ 0x6d6f_7665, extent, clouds.len());
+    let moved: Vec<PointCloud> = clouds
+        .iter()
+        .zip(&motions)
+        .map(|(c, m)| c.transformed(m))
+        .collect();
+    // x_world = pose_k x_k = pose_k M_k^-1 x'_k.
+    let moved_poses: Vec<Transform> = poses
+        .iter()
+        .zip(&motions)
+        .map(|(p, m)| p * invert_rigid(m))
+        .collect();
+    let config = Config {
+        seed: Some(seed),
+        ..config.clone()
+    };
+    let result = register(&moved, &config, None)?;
+    let diagonal = object_diagonal(clouds, poses);
+    let scores = score_poses(&result.poses, &moved_poses, diagonal);
+    Ok((result, scores))
+}
+
 /// Mean and (population) standard deviation; `(NaN, NaN)` for no values.
 pub fn mean_std(values: &[f64]) -> (f64, f64) {
     if values.is_empty() {
