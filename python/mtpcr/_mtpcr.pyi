@@ -15,6 +15,7 @@ _Path = str | PathLike[str]
 _Sampling = Literal["farthest", "random"]
 _Search = Literal["fast", "exact"]
 _Method = Literal["mtpcr", "mfea", "gmfea"]
+_Order = Literal["auto", "given"]
 _Callback = Callable[[int, dict[str, float]], bool | None]
 
 __version__: str
@@ -42,6 +43,7 @@ class Config:
         self,
         *,
         method: _Method = ...,
+        order: _Order = ...,
         population_size: int = ...,
         generations: int = ...,
         sample_ratio: float = ...,
@@ -60,6 +62,8 @@ class Config:
         search: _Search = ...,
         restarts: int = ...,
         refine_iterations: int = ...,
+        hypotheses: int = ...,
+        feature_voxel_ratio: float = ...,
         num_threads: int = ...,
         seed: int | None = ...,
     ) -> None: ...
@@ -82,6 +86,12 @@ class Config:
     def method(self) -> _Method:
         """The evolutionary algorithm: `mtpcr` (the paper's method), or the baselines
         `mfea`, `gmfea`. Paper: mtpcr."""
+    @property
+    def order(self) -> _Order:
+        """How the clouds relate: `auto` (two: a pair; three: the paper's loop; four or
+        more: a set in no known order, its overlapping pairs found and verified around
+        three-scan loops) or `given` (three or more given in loop order, searched
+        jointly as one loop). Paper: given."""
     @property
     def population_size(self) -> int:
         """Individuals per population (`n`; two populations per edge of the view graph).
@@ -154,6 +164,15 @@ class Config:
         evolution, which closes the loop exactly (beyond the paper); 0 = off, at most
         10000. Paper: 0."""
     @property
+    def hypotheses(self) -> int:
+        """Pose hypotheses per edge from local features (FPFH keypoints matched both
+        ways, verified by RANSAC and refined by ICP; beyond the paper), placed in the
+        edge's initial populations; 0 = off, at most 100. Paper: 0."""
+    @property
+    def feature_voxel_ratio(self) -> float:
+        """Spacing of the feature keypoints, as a fraction of the clouds' mean
+        principal-axes box diagonal, in (0, 0.5]. Paper: unused."""
+    @property
     def num_threads(self) -> int:
         """Worker threads for the loss evaluations; 0 = all cores, at most 4096. The
         result does not depend on it."""
@@ -185,7 +204,11 @@ class Registration:
         numbered from 0)."""
     @property
     def poses(self) -> NDArray[np.float64]:
-        """Each cloud into cloud 1's frame (``poses[0]`` is the identity), shape (N, 4, 4)."""
+        """Each cloud into cloud 1's frame (``poses[0]`` is the identity), shape (N, 4, 4);
+        all NaN for a cloud that could not be placed."""
+    @property
+    def unplaced(self) -> list[dict[str, Any]]:
+        """Clouds that could not be placed: dicts with ``cloud`` (from 0) and ``reason``."""
     @property
     def loop_residual(self) -> float | None:
         """``||T_n1 ... T23 @ T12 - I||_F`` for a loop of three or more clouds, else None."""
@@ -252,6 +275,7 @@ def register(
     on_generation: _Callback | None = None,
     config: Config | None = None,
     method: _Method = ...,
+    order: _Order = ...,
     population_size: int = ...,
     generations: int = ...,
     sample_ratio: float = ...,
@@ -270,6 +294,8 @@ def register(
     search: _Search = ...,
     restarts: int = ...,
     refine_iterations: int = ...,
+    hypotheses: int = ...,
+    feature_voxel_ratio: float = ...,
     num_threads: int = ...,
 ) -> Registration:
     """Registers overlapping (N, 3) clouds with no initial guess: ``register(a, b)`` for two,

@@ -284,7 +284,7 @@ def test_ctrl_c_stops_a_long_run_with_keyboard_interrupt():
 
 
 def test_two_clouds_and_four_in_a_loop(small_views):
-    """Two clouds are one pair (T12, no loop); four clouds in loop order are a loop of four."""
+    """Two clouds are one pair (T12, no loop); four clouds given in loop order are a loop."""
     a, b, c = small_views.clouds
     r = mtpcr.register(a, b, seed=2, **QUICK)
     assert r.transforms.shape == (1, 4, 4) and r.poses.shape == (2, 4, 4)
@@ -293,7 +293,7 @@ def test_two_clouds_and_four_in_a_loop(small_views):
     np.testing.assert_allclose(r.poses[1], np.linalg.inv(r.T12), atol=1e-12)
     with pytest.raises(AttributeError):
         r.T23  # noqa: B018
-    r4 = mtpcr.register(a, b, c, a[::2], seed=2, **QUICK)
+    r4 = mtpcr.register(a, b, c, a[::2], seed=2, order="given", **QUICK)
     assert [e["name"] for e in r4.edges] == ["T12", "T23", "T34", "T41"]
     assert r4.history.shape[1] == 8 and r4.poses.shape == (4, 4, 4)
     assert r4.loop_residual is not None

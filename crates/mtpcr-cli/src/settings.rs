@@ -5,7 +5,7 @@
 use crate::error::{CliResult, Failure};
 use clap::Args;
 use mtpcr_core::config::FIELDS;
-use mtpcr_core::{Config, Method, Sampling, SearchMethod};
+use mtpcr_core::{Config, Method, Order, Sampling, SearchMethod};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -33,6 +33,8 @@ pub struct RunArgs {
 #[derive(Args, Clone, Debug, Default)]
 #[command(next_help_heading = "Settings (config-file keys are the flag names with _ for -)")]
 pub struct SettingsArgs {
+    #[arg(long, value_name = "ORDER", value_parser = parse_name::<Order>)]
+    pub order: Option<Order>,
     #[arg(long, value_name = "METHOD", value_parser = parse_name::<Method>)]
     pub method: Option<Method>,
     #[arg(long, value_name = "N")]
@@ -100,6 +102,7 @@ impl SettingsArgs {
             };
         }
         apply!(
+            order,
             method,
             population_size,
             generations,

@@ -29,7 +29,7 @@ pub enum Order {
     Auto,
     /// Three or more clouds given in loop order (cloud k overlaps cloud k + 1, the last
     /// overlaps the first), searched jointly as one loop.
-    Ring,
+    Given,
 }
 
 /// One field of [`Config`]: its name (the same in Rust, Python, CLI flags and config files)
@@ -89,9 +89,9 @@ settings! {
     method: Method = Method::Mtpcr,
     /// How the clouds relate: `auto` (two: a pair; three: the paper's loop; four or more: a
     /// set in no known order, its overlapping pairs found and verified around three-scan
-    /// loops) or `ring` (three or more given in loop order, searched jointly as one loop).
-    /// Paper: ring.
-    order: Order = Order::Ring,
+    /// loops) or `given` (three or more given in loop order, searched jointly as one
+    /// loop). Paper: given.
+    order: Order = Order::Given,
     /// Individuals per population (`n`; two populations per edge of the view graph). In
     /// 4..=1000000. Paper: 100.
     population_size: usize = 100,

@@ -40,7 +40,7 @@ pub struct PreparedProblem {
 
 impl PreparedProblem {
     /// Prepares clouds as `config.order` says: two clouds are one pair, three (or more in
-    /// `ring` order) a ring ([`ViewGraph::for_views`]), four or more in `auto` order a set
+    /// `given` order) a ring ([`ViewGraph::for_views`]), four or more in `auto` order a set
     /// with no known edges ([`ViewGraph::general`]).
     pub fn new(clouds: &[PointCloud], config: &Config) -> Result<PreparedProblem> {
         let graph = match (config.order, clouds.len()) {

@@ -231,16 +231,37 @@ impl PyRegistration {
                 "clouds are numbered 0..{n}, got target {target} and source {source}"
             )));
         }
-        Ok(transform_to_py(
-            py,
-            &self.inner.t_target_source(target, source),
-        ))
+        match self.inner.t_target_source(target, source) {
+            Some(t) => Ok(transform_to_py(py, &t)),
+            None => Err(PyValueError::new_err(format!(
+                "cloud {target} or cloud {source} could not be placed (see unplaced)"
+            ))),
+        }
     }
 
-    /// Each cloud's transform into cloud 1's frame (``poses[0]`` is the identity), Nx4x4.
+    /// Each cloud's transform into cloud 1's frame (``poses[0]`` is the identity), Nx4x4;
+    /// all NaN for a cloud that could not be placed (see ``unplaced``).
     #[getter]
     fn poses<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray3<f64>> {
-        transforms_to_py(py, &self.inner.poses)
+        let nan = mtpcr_core::Transform::from_element(f64::NAN);
+        let poses: Vec<_> = self.inner.poses.iter().map(|p| p.unwrap_or(nan)).collect();
+        transforms_to_py(py, &poses)
+    }
+
+    /// The clouds that could not be placed: dicts with ``cloud`` (numbered from 0) and
+    /// ``reason``; empty when every cloud was placed.
+    #[getter]
+    fn unplaced<'py>(&self, py: Python<'py>) -> PyResult<Vec<Bound<'py, PyDict>>> {
+        self.inner
+            .unplaced
+            .iter()
+            .map(|u| {
+                let d = PyDict::new(py);
+                d.set_item("cloud", u.view)?;
+                d.set_item("reason", &u.reason)?;
+                Ok(d)
+            })
+            .collect()
     }
 
     /// ``||T_n1 ... T23 @ T12 - I||_F`` for three or more clouds in a loop (how far the
