@@ -207,6 +207,13 @@ class Registration:
         """Each cloud into cloud 1's frame (``poses[0]`` is the identity), shape (N, 4, 4);
         all NaN for a cloud that could not be placed."""
     @property
+    def confident(self) -> bool:
+        """Whether the result can be believed (every pair overlaps and its surfaces lie on
+        each other; every cloud placed)."""
+    @property
+    def verdict(self) -> dict[str, Any]:
+        """``confident``, ``reasons`` and per pair ``overlap`` and ``residual``."""
+    @property
     def unplaced(self) -> list[dict[str, Any]]:
         """Clouds that could not be placed: dicts with ``cloud`` (from 0) and ``reason``."""
     @property

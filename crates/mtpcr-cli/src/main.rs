@@ -1,7 +1,8 @@
 //! `mtpcr`: the command-line front-end. It parses, shows progress on stderr, writes results;
 //! all registration logic lives in `mtpcr-core`.
 //!
-//! Exit codes: 0 success, 1 failure (a message `error: ...` on stderr), 2 usage error.
+//! Exit codes: 0 success, 1 failure (a message `error: ...` on stderr), 2 usage error, 3
+//! registered and written but not confident (the verdict's reasons are printed).
 
 mod error;
 mod experiment;
@@ -97,6 +98,10 @@ enum Command {
         /// Write every run's numbers to this JSON file.
         #[arg(long, value_name = "FILE")]
         json: Option<PathBuf>,
+        /// Start every run from the scans placed by their ground-truth poses (relative
+        /// rotations near zero) instead of moving each by a seeded random rigid motion.
+        #[arg(long)]
+        ground_truth_frame: bool,
         #[command(flatten)]
         run: RunArgs,
     },
@@ -193,13 +198,18 @@ fn read_clouds(paths: &[PathBuf], quiet: bool) -> CliResult<(Vec<PointCloud>, Ve
     Ok((clouds, labels))
 }
 
+/// Exit status of `register` when the clouds were registered and the results written, but
+/// the verdict is not confident.
+const NOT_CONFIDENT: u8 = 3;
+
+/// Registers the files and writes the results folder; returns the verdict's `confident`.
 fn register_files(
     inputs: &[PathBuf],
     output: Option<&Path>,
     force: bool,
     seed: Option<u64>,
     run: &RunArgs,
-) -> CliResult<()> {
+) -> CliResult<bool> {
     let mut config = settings::resolve(run, seed)?;
     config.seed = Some(config.seed.unwrap_or_else(draw_seed));
     // The folder is checked before the (possibly long) reading.
@@ -261,6 +271,14 @@ fn register_files(
     for u in &result.unplaced {
         outln!("cloud {} NOT PLACED: {}", u.view + 1, u.reason);
     }
+    if result.verdict.confident {
+        outln!("verdict: confident (every pair overlaps and its surfaces lie on each other)");
+    } else {
+        outln!(
+            "verdict: NOT CONFIDENT: {}",
+            result.verdict.reasons.join("; ")
+        );
+    }
     let residual = result
         .loop_residual()
         .map_or("none (no loop)".to_string(), |r| format!("{r:.3e}"));
@@ -270,8 +288,12 @@ fn register_files(
         result.seconds,
         result.seed
     );
-    outln!("wrote {}/ ({})", dir.path.display(), written.join(", "));
-    Ok(())
+    let mut folder = dir.path.display().to_string();
+    if !folder.ends_with('/') {
+        folder.push('/');
+    }
+    outln!("wrote {folder} ({})", written.join(", "));
+    Ok(result.verdict.confident)
 }
 
 fn eval(
@@ -280,6 +302,7 @@ fn eval(
     seed: Option<u64>,
     data_root: Option<&Path>,
     json: Option<&Path>,
+    ground_truth_frame: bool,
     run: &RunArgs,
 ) -> CliResult<()> {
     let mut config = settings::resolve(run, None)?;
@@ -324,7 +347,11 @@ fn eval(
                 r + 1,
                 runs
             ));
-            let (result, scores) = run_moved(&clouds, &truth, &config, s)?;
+            let (result, scores) = if ground_truth_frame {
+                mtpcr_core::eval::run_in_ground_truth_frame(&clouds, &problem.poses, &config, s)?
+            } else {
+                run_moved(&clouds, &truth, &config, s)?
+            };
             bar.inc(1);
             if !run.quiet {
                 bar.suspend(|| {
@@ -347,6 +374,7 @@ fn eval(
                 "seed": s, "success": scores.success, "err_r": scores.err_r, "err_t": scores.err_t,
                 "rot_deg": scores.rot_deg, "seconds": result.seconds,
                 "transforms": result.transforms().iter().map(mtpcr_core::io::matrix_rows).collect::<Vec<_>>(),
+                "verdict": result.verdict,
             }));
             all.push((scores, result.seconds));
         }
@@ -465,6 +493,7 @@ fn eval_views(
             "seed": s, "success": scores.success, "rot_deg": scores.rot_deg,
             "trans_rel": scores.trans, "seconds": result.seconds,
             "unplaced": result.unplaced.iter().map(|u| u.view).collect::<Vec<_>>(),
+            "verdict": result.verdict,
             "poses": result.poses.iter().map(|p| p.as_ref().map(mtpcr_core::io::matrix_rows)).collect::<Vec<_>>(),
         }));
         all.push((scores.success, placed.len(), worst, mean, result.seconds));
@@ -541,15 +570,20 @@ fn main() -> ExitCode {
             force,
             seed,
             run,
-        } => {
-            register_files(clouds, output.as_deref(), *force, *seed, run).map(|_| ExitCode::SUCCESS)
-        }
+        } => register_files(clouds, output.as_deref(), *force, *seed, run).map(|confident| {
+            if confident {
+                ExitCode::SUCCESS
+            } else {
+                ExitCode::from(NOT_CONFIDENT)
+            }
+        }),
         Command::Eval {
             problems,
             runs,
             seed,
             data_root,
             json,
+            ground_truth_frame,
             run,
         } => eval(
             problems,
@@ -557,6 +591,7 @@ fn main() -> ExitCode {
             *seed,
             data_root.as_deref(),
             json.as_deref(),
+            *ground_truth_frame,
             run,
         )
         .map(|_| ExitCode::SUCCESS),

@@ -219,6 +219,8 @@ pub fn result_json(rec: &RunRecord<'_>) -> serde_json::Value {
         "points": rec.clouds.iter().map(PointCloud::len).collect::<Vec<_>>(),
         "convention": CONVENTION,
         "completed": r.completed,
+        "confident": r.verdict.confident,
+        "verdict": r.verdict,
         "edges": edges,
         "transforms": transforms,
         "poses": r.poses.iter().map(|p| p.as_ref().map(matrix_rows)).collect::<Vec<_>>(),

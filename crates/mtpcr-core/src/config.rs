@@ -145,8 +145,8 @@ settings! {
     /// Spacing of the feature keypoints, as a fraction of the clouds' mean principal-axes
     /// box diagonal, in (0, 0.5]. Paper: unused.
     feature_voxel_ratio: f64 = crate::features::DEFAULT_VOXEL_FRACTION,
-    /// Worker threads for the loss evaluations; 0 = all cores, at most 4096. The result does
-    /// not depend on it.
+    /// Worker threads for the loss evaluations; 0 = all cores, at most 4096 (more than four
+    /// per core are not started). The result does not depend on it.
     num_threads: usize = 0,
     /// Seed of the run; none draws one (reported in the result).
     seed: Option<u64> = None,

@@ -44,6 +44,7 @@ pub mod result;
 pub mod se3;
 pub mod search;
 pub mod synthetic;
+pub mod verdict;
 
 pub use cloud::{PointCloud, Sampling};
 pub use config::{Config, Method, Order};
@@ -55,6 +56,7 @@ pub use register::register;
 pub use result::{EdgeEstimate, Registration, Unplaced};
 pub use se3::Transform;
 pub use search::SearchMethod;
+pub use verdict::Verdict;
 
 /// The README's Rust example, compiled as a doctest so it cannot drift from the API.
 #[doc = include_str!("../../../README.md")]

@@ -22,6 +22,7 @@ use crate::problem::PreparedProblem;
 use crate::refine::refine_poses;
 use crate::result::{EdgeEstimate, Registration, Unplaced};
 use crate::se3::{invert_rigid, rotation_error_deg, translation_error, Rigid, Transform};
+use crate::verdict::{check_edge, judge};
 use rayon::prelude::*;
 
 /// Hypotheses per pair compared around each triangle.
@@ -62,7 +63,7 @@ pub(crate) fn register_unordered(
     }
     let n = prepared.clouds().len();
     let pairs = screen(prepared, config.hypotheses, pool)?;
-    let tolerance = LOOP_SHIFT_FRACTION * prepared.shift();
+    let tolerance = loop_tolerance(prepared);
     let chosen = verify(&pairs, n, tolerance);
 
     // Maximum spanning tree of the verified pairs (Kruskal), grown from the first scan.
@@ -150,12 +151,7 @@ pub(crate) fn register_unordered(
     used.sort_unstable();
     // Joint refinement of the placed scans over the used pairs.
     let refined = if config.refine_iterations > 0 {
-        let full = prepared.refine_clouds().ok_or_else(|| {
-            Error::config(
-                "refine_iterations",
-                "this problem was prepared without refinement",
-            )
-        })?;
+        let full = prepared.refine_clouds();
         let index: Vec<usize> = (0..n).filter(|&v| placed[v]).collect();
         let local = |v: usize| index.iter().position(|&x| x == v).expect("placed");
         let clouds: Vec<_> = index.iter().map(|&v| &full[v]).collect();
@@ -208,7 +204,24 @@ pub(crate) fn register_unordered(
             }
         })
         .collect();
-    let unplaced = (0..n)
+    let checks = used
+        .iter()
+        .map(|&p| {
+            let Edge {
+                source: s,
+                target: t,
+            } = pairs[p].edge;
+            let (ws, wt) = (refined[s].expect("placed"), refined[t].expect("placed"));
+            let centred = Rigid::from_matrix(&(invert_rigid(&wt) * ws));
+            check_edge(
+                prepared.refine_clouds(),
+                pairs[p].edge,
+                &centred,
+                prepared.eps(),
+            )
+        })
+        .collect();
+    let unplaced: Vec<Unplaced> = (0..n)
         .filter(|&v| !placed[v])
         .map(|v| Unplaced {
             view: v,
@@ -222,10 +235,16 @@ pub(crate) fn register_unordered(
                 .map(|w| prepared.to_original(v, 0, &w))
         })
         .collect();
+    let reasons = unplaced
+        .iter()
+        .map(|u| format!("cloud {} is not placed", u.view + 1))
+        .collect();
+    let verdict = judge(checks, reasons);
     Ok(Registration {
         edges,
         poses,
         unplaced,
+        verdict,
         task_names: Vec::new(),
         history: Vec::new(),
         evaluations: pairs.iter().map(|p| p.poses.len()).sum(),
@@ -277,22 +296,12 @@ fn verify(pairs: &[Pair], n: usize, tolerance: f64) -> Vec<Option<usize>> {
         for j in i + 1..n {
             for k in j + 1..n {
                 let (ij, jk, ik) = (index(i, j), index(j, k), index(i, k));
-                let mut best: Option<(f64, [usize; 3])> = None;
-                for (a, (t_ji, oa)) in pairs[ij].poses.iter().take(PER_SIDE).enumerate() {
-                    for (b, (t_kj, ob)) in pairs[jk].poses.iter().take(PER_SIDE).enumerate() {
-                        let via_j = t_kj * t_ji;
-                        for (c, (t_ki, oc)) in pairs[ik].poses.iter().take(PER_SIDE).enumerate() {
-                            if rotation_error_deg(&via_j, t_ki) < LOOP_DEGREES
-                                && translation_error(&via_j, t_ki) < tolerance
-                            {
-                                let score = oa + ob + oc;
-                                if best.is_none_or(|(s, _)| score > s) {
-                                    best = Some((score, [a, b, c]));
-                                }
-                            }
-                        }
-                    }
-                }
+                let best = best_closing_triple(
+                    &pairs[ij].poses,
+                    &pairs[jk].poses,
+                    &pairs[ik].poses,
+                    tolerance,
+                );
                 if let Some((score, [a, b, c])) = best {
                     votes[ij][a] += score;
                     votes[jk][b] += score;
@@ -311,6 +320,39 @@ fn verify(pairs: &[Pair], n: usize, tolerance: f64) -> Vec<Option<usize>> {
                 .map(|(h, _)| h)
         })
         .collect()
+}
+
+/// Among the first [`PER_SIDE`] hypotheses `(pose, overlap)` of three pairs i -> j, j -> k
+/// and i -> k, the combination that closes the loop (`T_kj T_ji ~ T_ki`) with the highest
+/// total overlap: `(total, [a, b, c])` indices into the three lists.
+pub(crate) fn best_closing_triple(
+    ij: &[(Transform, f64)],
+    jk: &[(Transform, f64)],
+    ik: &[(Transform, f64)],
+    tolerance: f64,
+) -> Option<(f64, [usize; 3])> {
+    let mut best: Option<(f64, [usize; 3])> = None;
+    for (a, (t_ji, oa)) in ij.iter().take(PER_SIDE).enumerate() {
+        for (b, (t_kj, ob)) in jk.iter().take(PER_SIDE).enumerate() {
+            let via_j = t_kj * t_ji;
+            for (c, (t_ki, oc)) in ik.iter().take(PER_SIDE).enumerate() {
+                if rotation_error_deg(&via_j, t_ki) < LOOP_DEGREES
+                    && translation_error(&via_j, t_ki) < tolerance
+                {
+                    let score = oa + ob + oc;
+                    if best.is_none_or(|(s, _)| score > s) {
+                        best = Some((score, [a, b, c]));
+                    }
+                }
+            }
+        }
+    }
+    best
+}
+
+/// The loop-closing tolerance on translations for a problem (a fraction of its shift).
+pub(crate) fn loop_tolerance(prepared: &PreparedProblem) -> f64 {
+    LOOP_SHIFT_FRACTION * prepared.shift()
 }
 
 /// Why scan `v` could not be placed.

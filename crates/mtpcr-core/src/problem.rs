@@ -23,8 +23,8 @@ pub const MIN_POINTS: usize = 10;
 pub struct PreparedProblem {
     graph: ViewGraph,
     clouds: Vec<IndexedCloud>,
-    /// Full-resolution centred clouds for the refinement (built only when it is on).
-    full: Option<Vec<RefineCloud>>,
+    /// Full-resolution centred surface points for the refinement and the verdict.
+    full: Vec<RefineCloud>,
     centroids: Vec<[f64; 3]>,
     eps: f64,
     shift: f64,
@@ -122,17 +122,14 @@ impl PreparedProblem {
                 .map(|c| IndexedCloud::new(c.into_points(), eps, cap, search))
                 .collect()
         });
-        let full = (config.refine_iterations > 0).then(|| {
-            pool.install(|| {
-                use rayon::prelude::*;
-                clouds
-                    .par_iter()
-                    .zip(&centroids)
-                    .map(|(c, m)| {
-                        RefineCloud::new(c.translated([-m[0], -m[1], -m[2]]).into_points())
-                    })
-                    .collect()
-            })
+        // The refinement's surface points: also what the verdict measures, so always built.
+        let full = pool.install(|| {
+            use rayon::prelude::*;
+            clouds
+                .par_iter()
+                .zip(&centroids)
+                .map(|(c, m)| RefineCloud::new(c.translated([-m[0], -m[1], -m[2]]).into_points()))
+                .collect()
         });
         let features = if config.hypotheses > 0 {
             let full: Vec<Vec<[f64; 3]>> = clouds
@@ -194,9 +191,9 @@ impl PreparedProblem {
         self.seconds
     }
 
-    /// The full-resolution clouds of the refinement, when it was prepared.
-    pub(crate) fn refine_clouds(&self) -> Option<&[RefineCloud]> {
-        self.full.as_deref()
+    /// The full-resolution surface points of the refinement and the verdict.
+    pub(crate) fn refine_clouds(&self) -> &[RefineCloud] {
+        &self.full
     }
 
     /// The losses of edge `edge` for a transform given in the ORIGINAL frames:
@@ -304,8 +301,14 @@ impl PreparedProblem {
     }
 }
 
-/// A pool of `num_threads` workers (0 = all cores).
+/// More workers than this many per core only add overhead (4096 threads made a 0.1 s run
+/// take a minute); results never depend on the count, so larger requests are clamped.
+const MAX_THREADS_PER_CORE: usize = 4;
+
+/// A pool of `num_threads` workers (0 = all cores), at most [`MAX_THREADS_PER_CORE`] per core.
 pub(crate) fn thread_pool(num_threads: usize) -> Result<rayon::ThreadPool> {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let num_threads = num_threads.min(MAX_THREADS_PER_CORE * cores);
     rayon::ThreadPoolBuilder::new()
         .num_threads(num_threads)
         .build()

@@ -113,6 +113,21 @@ fn neighbourhood_size(tree: &ImmutableKdTree<f64, 3>, points: &[[f64; 3]]) -> us
 }
 
 impl RefineCloud {
+    /// The surface points.
+    pub fn points(&self) -> &[[f64; 3]] {
+        &self.points
+    }
+
+    /// Their unit normals (sign arbitrary).
+    pub fn normals(&self) -> &[[f64; 3]] {
+        &self.normals
+    }
+
+    /// A KD-tree of the points.
+    pub fn tree(&self) -> &ImmutableKdTree<f64, 3> {
+        &self.tree
+    }
+
     pub fn new(points: Vec<[f64; 3]>) -> RefineCloud {
         let tree = ImmutableKdTree::<f64, 3>::new_from_slice(&points)
             .expect("a non-empty finite cloud always builds a KD-tree");

@@ -7,11 +7,12 @@ use crate::config::{Config, Method};
 use crate::ea::{self, Observer, Outcome, Progress, SearchBox, Tasks};
 use crate::error::{Error, Result};
 use crate::loss::Loss;
-use crate::multiview::register_unordered;
+use crate::multiview::{best_closing_triple, loop_tolerance, register_unordered};
 use crate::problem::{thread_pool, PreparedProblem};
 use crate::refine::refine_poses;
 use crate::result::{EdgeEstimate, Registration};
-use crate::se3::{encode, invert_rigid, Rigid, Transform};
+use crate::se3::{encode, invert_rigid, Individual, Rigid, Transform};
+use crate::verdict::{check_edge, judge};
 use std::ops::ControlFlow;
 use std::time::Instant;
 
@@ -45,15 +46,7 @@ impl PreparedProblem {
             .collect();
         let mut losses: Vec<&dyn Loss> = aiding.iter().map(|l| l as &dyn Loss).collect();
         losses.extend(original.iter().map(|l| l as &dyn Loss));
-        // Feature hypotheses of every edge, in both of its initial populations.
-        let seeds = graph
-            .edges()
-            .iter()
-            .map(|e| {
-                let found = self.hypotheses(e.source, e.target, config.hypotheses)?;
-                Ok(found.iter().map(|t| encode(&t.to_matrix())).collect())
-            })
-            .collect::<Result<Vec<Vec<_>>>>()?;
+        let seeds = self.seeds(config)?;
         let tasks = Tasks {
             graph,
             losses,
@@ -105,10 +98,18 @@ impl PreparedProblem {
                 .map(Some)
                 .collect(),
         };
+        let checks = graph
+            .edges()
+            .iter()
+            .zip(&centred)
+            .map(|(e, t)| check_edge(self.refine_clouds(), *e, t, self.eps()))
+            .collect();
+        let verdict = judge(checks, Vec::new());
         Ok(Registration {
             edges: estimates,
             poses,
             unplaced: Vec::new(),
+            verdict,
             task_names: graph.task_names(),
             history: out.history,
             evaluations,
@@ -119,6 +120,47 @@ impl PreparedProblem {
             eps: self.eps(),
             shift: self.shift(),
         })
+    }
+
+    /// Feature hypotheses of every edge, for both of its initial populations, each edge's
+    /// sorted by overlap (the original task's local loss); on the three-view loop, the
+    /// combination that closes the loop first (the paper's loop as a verifier).
+    fn seeds(&self, config: &Config) -> Result<Vec<Vec<Individual>>> {
+        let graph = self.graph();
+        let mut scored: Vec<Vec<(Transform, f64)>> = graph
+            .edges()
+            .iter()
+            .map(|e| {
+                let loss = self.inlier_loss(e.source, e.target);
+                let mut found: Vec<(Transform, f64)> = self
+                    .hypotheses(e.source, e.target, config.hypotheses)?
+                    .iter()
+                    .map(|r| (r.to_matrix(), 1.0 - loss.evaluate(r)))
+                    .collect();
+                found.sort_by(|a, b| b.1.total_cmp(&a.1));
+                Ok(found)
+            })
+            .collect::<Result<_>>()?;
+        if graph.is_ring() && graph.edges().len() == 3 {
+            // Edges 0 -> 1, 1 -> 2 and 2 -> 0: T_21 T_10 ~ T_20 = T_02^-1.
+            let closing: Vec<(Transform, f64)> = scored[2]
+                .iter()
+                .map(|(t, o)| (invert_rigid(t), *o))
+                .collect();
+            let tolerance = loop_tolerance(self);
+            if let Some((_, [a, b, c])) =
+                best_closing_triple(&scored[0], &scored[1], &closing, tolerance)
+            {
+                for (list, first) in scored.iter_mut().zip([a, b, c]) {
+                    let chosen = list.remove(first);
+                    list.insert(0, chosen);
+                }
+            }
+        }
+        Ok(scored
+            .iter()
+            .map(|list| list.iter().map(|(t, _)| encode(t)).collect())
+            .collect())
     }
 
     /// Refines given edge transforms (original frames, in edge order; e.g. an earlier result
@@ -175,14 +217,8 @@ impl PreparedProblem {
         iterations: usize,
         pool: &rayon::ThreadPool,
     ) -> Result<Vec<Rigid>> {
-        let full = self.refine_clouds().ok_or_else(|| {
-            Error::config(
-                "refine_iterations",
-                "this problem was prepared without refinement; prepare it again",
-            )
-        })?;
         let start = self.consistent_start(pairs);
-        let full: Vec<&_> = full.iter().collect();
+        let full: Vec<&_> = self.refine_clouds().iter().collect();
         Ok(refine_poses(
             &full,
             self.graph().edges(),

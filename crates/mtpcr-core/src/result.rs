@@ -3,6 +3,7 @@
 
 use crate::graph::Edge;
 use crate::se3::{invert_rigid, Transform};
+use crate::verdict::Verdict;
 
 /// The estimate of one edge. `t_target_source` maps points of view `source` into the frame of
 /// view `target` (`x_target = T x_source`), in the clouds' original frames.
@@ -50,6 +51,8 @@ pub struct Registration {
     pub poses: Vec<Option<Transform>>,
     /// The views that could not be placed, with the reason (only scans in no known order).
     pub unplaced: Vec<Unplaced>,
+    /// Whether the result can be believed, with the measures behind it.
+    pub verdict: Verdict,
     /// The task names, in slot order (the columns of `history`).
     pub task_names: Vec<String>,
     /// Best cost of each task of the kept evolution after its initial population (row 0) and

@@ -248,6 +248,25 @@ impl PyRegistration {
         transforms_to_py(py, &poses)
     }
 
+    /// Whether the result can be believed: every pair overlaps and its surfaces lie on each
+    /// other at the returned transforms, and every cloud was placed (``verdict`` says why
+    /// not).
+    #[getter]
+    fn confident(&self) -> bool {
+        self.inner.verdict.confident
+    }
+
+    /// The verdict: a dict with ``confident``, ``reasons`` (list of str, empty when
+    /// confident) and ``edges`` (per pair: ``source``, ``target``, ``overlap``: fraction of
+    /// points within eps of the other cloud, ``residual``: their median distance to its
+    /// surface, relative to eps).
+    #[getter]
+    fn verdict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let text = serde_json::to_string(&self.inner.verdict)
+            .map_err(|e| PyValueError::new_err(format!("verdict: {e}")))?;
+        crate::convert::json_text_to_py(py, &text)
+    }
+
     /// The clouds that could not be placed: dicts with ``cloud`` (numbered from 0) and
     /// ``reason``; empty when every cloud was placed.
     #[getter]
@@ -355,9 +374,10 @@ impl PyRegistration {
             .loop_residual()
             .map_or("None".to_string(), |v| format!("{v:.3e}"));
         format!(
-            "Registration(clouds={}, completed={}, generations_run={} ({} restarts x {}), \
-             seed={}, loop_residual={residual}, seconds={:.2}, best_costs={{{}}})",
+            "Registration(clouds={}, confident={}, completed={}, generations_run={} ({} restarts \
+             x {}), seed={}, loop_residual={residual}, seconds={:.2}, best_costs={{{}}})",
             r.poses.len(),
+            if r.verdict.confident { "True" } else { "False" },
             if r.completed { "True" } else { "False" },
             r.generations_run,
             self.config.restarts,
