@@ -15,8 +15,8 @@ for variant in "${@:-paper mfea gmfea default}"; do
       paper) flags=(--paper) ;;
       mfea) flags=(--paper --method mfea) ;;
       gmfea) flags=(--paper --method gmfea) ;;
-      # The default setting before feature hypotheses existed.
-      default) flags=(--hypotheses 0) ;;
+      # The default setting before feature hypotheses and early stopping existed.
+      default) flags=(--hypotheses 0 --stop-when-restarts-agree false) ;;
       *) echo "unknown variant $v" >&2; exit 2 ;;
     esac
     echo "== $v"

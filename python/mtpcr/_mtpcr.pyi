@@ -61,6 +61,7 @@ class Config:
         refresh_loop_term: bool = ...,
         search: _Search = ...,
         restarts: int = ...,
+        stop_when_restarts_agree: bool = ...,
         refine_iterations: int = ...,
         hypotheses: int = ...,
         feature_voxel_ratio: float = ...,
@@ -159,6 +160,11 @@ class Config:
         with the lowest sum of final original-task costs is kept (beyond the paper). In
         1..=1000. Paper: 1."""
     @property
+    def stop_when_restarts_agree(self) -> bool:
+        """Stop the restarts as soon as two of them end on the same transforms (every
+        edge within 2 degrees; beyond the paper): more restarts would change the cost,
+        not the answer. Paper: false."""
+    @property
     def refine_iterations(self) -> int:
         """Iterations of the joint trimmed point-to-plane ICP of all clouds after the
         evolution, which closes the loop exactly (beyond the paper); 0 = off, at most
@@ -174,8 +180,8 @@ class Config:
         principal-axes box diagonal, in (0, 0.5]. Paper: unused."""
     @property
     def num_threads(self) -> int:
-        """Worker threads for the loss evaluations; 0 = all cores, at most 4096. The
-        result does not depend on it."""
+        """Worker threads for the loss evaluations; 0 = all cores, at most 4096 (more
+        than four per core are not started). The result does not depend on it."""
     @property
     def seed(self) -> int | None:
         """Seed of the run; none draws one (reported in the result)."""
@@ -300,6 +306,7 @@ def register(
     refresh_loop_term: bool = ...,
     search: _Search = ...,
     restarts: int = ...,
+    stop_when_restarts_agree: bool = ...,
     refine_iterations: int = ...,
     hypotheses: int = ...,
     feature_voxel_ratio: float = ...,

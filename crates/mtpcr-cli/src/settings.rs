@@ -75,6 +75,8 @@ pub struct SettingsArgs {
     pub refine_iterations: Option<usize>,
     #[arg(long, value_name = "N")]
     pub hypotheses: Option<usize>,
+    #[arg(long, value_name = "BOOL")]
+    pub stop_when_restarts_agree: Option<bool>,
     #[arg(long, value_name = "RATIO")]
     pub feature_voxel_ratio: Option<f64>,
     #[arg(long = "threads", visible_alias = "num-threads", value_name = "N")]
@@ -123,6 +125,7 @@ impl SettingsArgs {
             restarts,
             refine_iterations,
             hypotheses,
+            stop_when_restarts_agree,
             feature_voxel_ratio,
             num_threads,
         );

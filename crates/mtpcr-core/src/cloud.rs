@@ -225,6 +225,45 @@ impl PointCloud {
         sum / self.points.len() as f64
     }
 
+    /// The cloud without its stray points: points whose third-nearest neighbour in the cloud
+    /// is more than [`STRAY_FACTOR`] times the median such distance away (isolated points and
+    /// pairs or triples far from the surface). Meant for evenly spread samples (farthest-point
+    /// sampling), where a clean scan has none: its neighbour distances are within a factor of
+    /// about two of each other. Returns the cloud and the number of points removed.
+    pub fn without_strays(&self) -> (PointCloud, usize) {
+        const K: usize = 3;
+        if self.points.len() <= 2 * K {
+            return (self.clone(), 0);
+        }
+        let Ok(tree) = ImmutableKdTree::<f64, 3>::new_from_slice(&self.points) else {
+            return (self.clone(), 0);
+        };
+        let k = NonZero::new(K + 1).expect("K + 1 is not zero");
+        let far: Vec<f64> = self
+            .points
+            .iter()
+            .map(|p| {
+                let nn = tree
+                    .query(p)
+                    .nearest_n::<SquaredEuclidean<f64>>(k)
+                    .execute();
+                nn.iter().map(|r| r.distance).fold(0.0, f64::max).sqrt()
+            })
+            .collect();
+        let mut sorted = far.clone();
+        sorted.sort_by(f64::total_cmp);
+        let limit = STRAY_FACTOR * sorted[sorted.len() / 2];
+        let kept: Vec<[f64; 3]> = self
+            .points
+            .iter()
+            .zip(&far)
+            .filter(|(_, d)| **d <= limit)
+            .map(|(p, _)| *p)
+            .collect();
+        let removed = self.points.len() - kept.len();
+        (PointCloud { points: kept }, removed)
+    }
+
     /// The noise protocol of the paper: centre the cloud, divide by its largest absolute
     /// coordinate, add Gaussian noise of standard deviation `sigma` to every coordinate, scale
     /// back and undo the centring.
@@ -263,6 +302,10 @@ impl PointCloud {
         Ok(PointCloud { points })
     }
 }
+
+/// A sample point is a stray point when its third-nearest neighbour is farther than this many
+/// times the median (see [`PointCloud::without_strays`]).
+pub const STRAY_FACTOR: f64 = 10.0;
 
 /// Axis-aligned bounds `(min, max)` of points; both are zero for no points.
 pub fn bounds(points: &[[f64; 3]]) -> ([f64; 3], [f64; 3]) {
@@ -399,6 +442,23 @@ mod tests {
             / (3.0 * c.len() as f64);
         let sigma = var.sqrt() / scale;
         assert!((sigma - 0.02).abs() < 0.001, "{sigma}");
+    }
+
+    #[test]
+    fn stray_points_are_removed_and_clean_samples_kept_whole() {
+        let clean = random_cloud(2000, 8).farthest_point_sample(400);
+        let (same, removed) = clean.without_strays();
+        assert_eq!(
+            (removed, &same),
+            (0, &clean),
+            "an even sample has no stray point"
+        );
+        let mut pts = clean.points().to_vec();
+        pts.push([50.0, 0.0, 0.0]);
+        pts.extend([[-20.0, 3.0, 1.0], [-20.001, 3.0, 1.0]]);
+        let (kept, removed) = PointCloud::new(pts).without_strays();
+        assert_eq!(removed, 3);
+        assert_eq!(kept, clean);
     }
 
     #[test]

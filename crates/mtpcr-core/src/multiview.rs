@@ -249,6 +249,7 @@ pub(crate) fn register_unordered(
         history: Vec::new(),
         evaluations: pairs.iter().map(|p| p.poses.len()).sum(),
         generations_run: 0,
+        restarts_run: 0,
         completed: true,
         seconds: start.elapsed().as_secs_f64(),
         seed,

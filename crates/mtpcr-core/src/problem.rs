@@ -89,6 +89,9 @@ impl PreparedProblem {
                 })
                 .collect()
         });
+        // Stray points (far from every surface) would stretch the extent, eps and the
+        // search box; farthest-point sampling always keeps them, so drop them here.
+        let sampled: Vec<PointCloud> = sampled.iter().map(|c| c.without_strays().0).collect();
         let centroids: Vec<[f64; 3]> = sampled.iter().map(PointCloud::centroid).collect();
         let centred: Vec<PointCloud> = sampled
             .iter()
@@ -137,7 +140,13 @@ impl PreparedProblem {
                 .zip(&centroids)
                 .map(|(c, m)| c.translated([-m[0], -m[1], -m[2]]).into_points())
                 .collect();
-            let refs: Vec<&[[f64; 3]]> = full.iter().map(Vec::as_slice).collect();
+            // The keypoint spacing follows the size of the samples (stray points removed).
+            let centred_samples: Vec<PointCloud> = sampled
+                .iter()
+                .zip(&centroids)
+                .map(|(c, m)| c.translated([-m[0], -m[1], -m[2]]))
+                .collect();
+            let refs: Vec<&[[f64; 3]]> = centred_samples.iter().map(PointCloud::points).collect();
             let feature_config = FeatureConfig::for_clouds(&refs, config.feature_voxel_ratio)?;
             let described: Vec<Features> = pool.install(|| {
                 use rayon::prelude::*;

@@ -11,7 +11,10 @@ use crate::multiview::{best_closing_triple, loop_tolerance, register_unordered};
 use crate::problem::{thread_pool, PreparedProblem};
 use crate::refine::refine_poses;
 use crate::result::{EdgeEstimate, Registration};
-use crate::se3::{encode, invert_rigid, Individual, Rigid, Transform};
+use crate::se3::{
+    decode, encode, invert_rigid, rotation_error_deg, translation_error, Individual, Rigid,
+    Transform,
+};
 use crate::verdict::{check_edge, judge};
 use std::ops::ControlFlow;
 use std::time::Instant;
@@ -54,8 +57,15 @@ impl PreparedProblem {
             shift: self.shift(),
             seeds,
         };
-        let (out, evaluations, generations_run, completed) =
-            search(&tasks, config, seed, &pool, observer);
+        let found = search(&tasks, config, seed, self.shift(), &pool, observer);
+        let SearchOutcome {
+            best: out,
+            evaluations,
+            generations_run,
+            completed,
+            restarts_run,
+            agreed,
+        } = found;
 
         let evolved: Vec<Rigid> = (0..edges)
             .map(|e| Rigid::from_individual(&out.best[edges + e]))
@@ -104,7 +114,13 @@ impl PreparedProblem {
             .zip(&centred)
             .map(|(e, t)| check_edge(self.refine_clouds(), *e, t, self.eps()))
             .collect();
-        let verdict = judge(checks, Vec::new());
+        let mut reasons = Vec::new();
+        if restarts_run > 1 && !agreed && completed {
+            reasons.push(format!(
+                "no two of the {restarts_run} independent restarts ended on the same transforms"
+            ));
+        }
+        let verdict = judge(checks, reasons);
         Ok(Registration {
             edges: estimates,
             poses,
@@ -114,6 +130,7 @@ impl PreparedProblem {
             history: out.history,
             evaluations,
             generations_run,
+            restarts_run,
             completed,
             seconds: start.elapsed().as_secs_f64(),
             seed,
@@ -280,23 +297,46 @@ impl PreparedProblem {
     }
 }
 
-/// Runs `config.restarts` independent evolutions and keeps the one with the lowest sum of
-/// final original-task costs; returns it with the evaluations, generations run (all
-/// restarts) and whether the observer let every restart finish.
+/// Two restarts agree when every edge's transforms are this close (degrees)...
+const AGREE_DEGREES: f64 = 2.0;
+/// ...and their translations differ by less than this fraction of `shift`.
+const AGREE_SHIFT_FRACTION: f64 = 0.02;
+
+/// What the restarts of a search gave.
+struct SearchOutcome {
+    /// The kept evolution (lowest sum of final original costs).
+    best: Outcome,
+    evaluations: usize,
+    generations_run: usize,
+    completed: bool,
+    /// Restarts run.
+    restarts_run: usize,
+    /// Two restarts ended on the same transforms (within [`AGREE_DEGREES`]).
+    agreed: bool,
+}
+
+/// Runs up to `config.restarts` independent evolutions and keeps the one with the lowest sum
+/// of final original-task costs; with `stop_when_restarts_agree`, stops as soon as two
+/// restarts agree on every edge (more would change the cost, not the answer).
 fn search(
     tasks: &Tasks<'_>,
     config: &Config,
     seed: u64,
+    shift: f64,
     pool: &rayon::ThreadPool,
     observer: Option<Observer<'_>>,
-) -> (Outcome, usize, usize, bool) {
+) -> SearchOutcome {
     let mut keep_going = |_: &Progress| ControlFlow::Continue(());
     let observer = observer.unwrap_or(&mut keep_going);
     let total_generations = config.restarts * config.generations;
+    let edges = tasks.count() / 2;
     let mut best: Option<Outcome> = None;
+    let mut finals: Vec<Vec<Transform>> = Vec::new();
     let mut evaluations = 0;
     let mut generations_run = 0;
     let mut completed = true;
+    let mut agreed = false;
+    let mut restarts_run = 0;
     for r in 0..config.restarts {
         // Restart 0 uses the seed itself, so one restart is exactly the paper's run.
         let run_seed = if r == 0 {
@@ -319,9 +359,19 @@ fn search(
             Method::Mfea => ea::mfea::run_mfea(tasks, config, run_seed, pool, &mut forward, false),
             Method::Gmfea => ea::mfea::run_mfea(tasks, config, run_seed, pool, &mut forward, true),
         };
+        restarts_run += 1;
         evaluations += out.evaluations;
         generations_run += out.generations_run;
         let stopped = !out.completed;
+        let transforms: Vec<Transform> = (0..edges).map(|e| decode(&out.best[edges + e])).collect();
+        let agrees = |other: &Vec<Transform>| {
+            other.iter().zip(&transforms).all(|(a, b)| {
+                rotation_error_deg(a, b) < AGREE_DEGREES
+                    && translation_error(a, b) < AGREE_SHIFT_FRACTION * shift
+            })
+        };
+        agreed |= finals.iter().any(agrees);
+        finals.push(transforms);
         if best
             .as_ref()
             .is_none_or(|b| out.original_total() < b.original_total())
@@ -332,9 +382,18 @@ fn search(
             completed = false;
             break;
         }
+        if agreed && config.stop_when_restarts_agree {
+            break;
+        }
     }
-    let best = best.expect("at least one restart runs");
-    (best, evaluations, generations_run, completed)
+    SearchOutcome {
+        best: best.expect("at least one restart runs"),
+        evaluations,
+        generations_run,
+        completed,
+        restarts_run,
+        agreed,
+    }
 }
 
 /// A well-mixed seed for restart `r` (splitmix64 of the pair).

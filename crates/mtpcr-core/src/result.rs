@@ -62,6 +62,9 @@ pub struct Registration {
     pub evaluations: usize,
     /// Generations run (all restarts; less than configured when the observer stopped the run).
     pub generations_run: usize,
+    /// Restarts run (fewer than configured when two agreed early, see
+    /// `stop_when_restarts_agree`, or when the observer stopped the run).
+    pub restarts_run: usize,
     /// False when the observer stopped the run early.
     pub completed: bool,
     /// Wall-clock seconds of the whole call (preparation included for [`crate::register`]).
