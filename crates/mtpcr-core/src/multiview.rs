@@ -7,7 +7,7 @@
 //! 2. **Verification**: for every triangle of scans, the combination of one hypothesis per
 //!    side whose loop product is near the identity (the paper's three-view loop as a
 //!    verifier) votes for its three hypotheses. A pair is verified when one hypothesis has a
-//!    vote; that one is its pose.
+//!    vote and passes the verdict's surface test (`crate::verdict`); that one is its pose.
 //! 3. **Placement**: a maximum spanning tree of the verified pairs (by overlap) from the first
 //!    scan places every scan it reaches; verified pairs that agree with the tree and overlap
 //!    well are loop closures. Scans the tree does not reach are reported unplaced, with the
@@ -22,7 +22,7 @@ use crate::problem::PreparedProblem;
 use crate::refine::refine_poses;
 use crate::result::{EdgeEstimate, Registration, Unplaced};
 use crate::se3::{invert_rigid, rotation_error_deg, translation_error, Rigid, Transform};
-use crate::verdict::{check_edge, judge};
+use crate::verdict::{check_edge, doubts, judge, EdgeCheck, MAX_RESIDUAL, MIN_OVERLAP};
 use rayon::prelude::*;
 
 /// Hypotheses per pair compared around each triangle.
@@ -46,6 +46,10 @@ struct Pair {
     poses: Vec<(Transform, f64)>,
 }
 
+/// Rounds of placement: a pair whose fit fails at the refined poses is rejected and the
+/// spanning tree built again without it.
+const MAX_ROUNDS: usize = 4;
+
 /// Registers the prepared clouds (a general graph; its edges are ignored) as an unordered
 /// set. Needs feature hypotheses (`config.hypotheses > 0`).
 pub(crate) fn register_unordered(
@@ -65,122 +69,66 @@ pub(crate) fn register_unordered(
     let pairs = screen(prepared, config.hypotheses, pool)?;
     let tolerance = loop_tolerance(prepared);
     let chosen = verify(&pairs, n, tolerance);
-
-    // Maximum spanning tree of the verified pairs (Kruskal), grown from the first scan.
-    let mut order: Vec<usize> = (0..pairs.len()).filter(|&p| chosen[p].is_some()).collect();
-    order.sort_by(|&a, &b| {
-        let (oa, ob) = (
-            pairs[a].poses[chosen[a].unwrap_or(0)].1,
-            pairs[b].poses[chosen[b].unwrap_or(0)].1,
-        );
-        ob.total_cmp(&oa).then(a.cmp(&b))
-    });
-    let mut component: Vec<usize> = (0..n).collect();
-    fn find(c: &mut [usize], v: usize) -> usize {
-        let mut r = v;
-        while c[r] != r {
-            r = c[r];
-        }
-        c[v] = r;
-        r
-    }
-    let mut tree = Vec::new();
-    for &p in &order {
-        let (a, b) = (
-            find(&mut component, pairs[p].edge.source),
-            find(&mut component, pairs[p].edge.target),
-        );
-        if a != b {
-            component[a.max(b)] = a.min(b);
-            tree.push(p);
-        }
-    }
-    let root_component = find(&mut component, 0);
-    let placed: Vec<bool> = (0..n)
-        .map(|v| find(&mut component, v) == root_component)
-        .collect();
-
-    // Poses (centred, into scan 0's frame) along the tree.
-    let mut poses: Vec<Option<Transform>> = vec![None; n];
-    poses[0] = Some(Transform::identity());
-    let mut grew = true;
-    while grew {
-        grew = false;
-        for &p in &tree {
-            let Edge {
-                source: s,
-                target: t,
-            } = pairs[p].edge;
-            let t_ts = pairs[p].poses[chosen[p].unwrap_or(0)].0;
-            match (poses[s], poses[t]) {
-                (Some(ws), None) => {
-                    poses[t] = Some(ws * invert_rigid(&t_ts));
-                    grew = true;
-                }
-                (None, Some(wt)) => {
-                    poses[s] = Some(wt * t_ts);
-                    grew = true;
-                }
-                _ => {}
-            }
-        }
-    }
-    // Loop closures: verified pairs outside the tree that agree with the tree's poses.
-    let mut used: Vec<usize> = tree.clone();
-    for p in 0..pairs.len() {
-        let (Some(h), false) = (chosen[p], tree.contains(&p)) else {
-            continue;
-        };
-        let Edge {
-            source: s,
-            target: t,
-        } = pairs[p].edge;
-        if pairs[p].poses[h].1 < CLOSURE_MIN_OVERLAP {
-            continue;
-        }
-        if let (Some(ws), Some(wt)) = (poses[s], poses[t]) {
-            let implied = invert_rigid(&wt) * ws;
-            let own = pairs[p].poses[h].0;
-            if rotation_error_deg(&implied, &own) < CLOSURE_DEGREES
-                && translation_error(&implied, &own) < tolerance
-            {
-                used.push(p);
-            }
-        }
-    }
-    used.sort_unstable();
-    // Joint refinement of the placed scans over the used pairs.
-    let refined = if config.refine_iterations > 0 {
-        let full = prepared.refine_clouds();
-        let index: Vec<usize> = (0..n).filter(|&v| placed[v]).collect();
-        let local = |v: usize| index.iter().position(|&x| x == v).expect("placed");
-        let clouds: Vec<_> = index.iter().map(|&v| &full[v]).collect();
-        let edges: Vec<Edge> = used
-            .iter()
-            .map(|&p| Edge {
-                source: local(pairs[p].edge.source),
-                target: local(pairs[p].edge.target),
+    // A verified pose must also pass the verdict's surface test.
+    let mut rejected: Vec<bool> = pool.install(|| {
+        (0..pairs.len())
+            .into_par_iter()
+            .map(|p| {
+                chosen[p].is_none_or(|h| {
+                    let c = check_edge(
+                        prepared.refine_clouds(),
+                        pairs[p].edge,
+                        &Rigid::from_matrix(&pairs[p].poses[h].0),
+                        prepared.eps(),
+                    );
+                    !(c.overlap >= MIN_OVERLAP && c.residual <= MAX_RESIDUAL)
+                })
             })
-            .collect();
-        let start_poses: Vec<Rigid> = index
+            .collect()
+    });
+    let mut dropped: Vec<(usize, String)> = Vec::new();
+    let mut round = 0;
+    let (placed, used, refined) = loop {
+        round += 1;
+        let (mut placed, mut used, poses) = place(&pairs, &chosen, &rejected, n, tolerance);
+        let refined = refine_placed(prepared, config, pool, &pairs, &used, &placed, &poses);
+        let checks: Vec<EdgeCheck> = used
             .iter()
-            .map(|&v| Rigid::from_matrix(&poses[v].expect("placed")))
+            .map(|&p| measure(prepared, &pairs[p], &refined))
             .collect();
-        let out = refine_poses(
-            &clouds,
-            &edges,
-            start_poses,
-            prepared.eps(),
-            config.refine_iterations,
-            pool,
-        );
-        let mut all = poses.clone();
-        for (k, &v) in index.iter().enumerate() {
-            all[v] = Some(out[k].to_matrix());
+        let failing: Vec<usize> = used
+            .iter()
+            .zip(doubts(&checks))
+            .filter(|(_, d)| d.is_some())
+            .map(|(&p, _)| p)
+            .collect();
+        if failing.is_empty() {
+            break (placed, used, refined);
         }
-        all
-    } else {
-        poses
+        for &p in &failing {
+            rejected[p] = true;
+        }
+        if round < MAX_ROUNDS {
+            continue;
+        }
+        // Last round: drop the failing pairs and the scans only they connected.
+        used.retain(|p| !failing.contains(p));
+        let reach = reachable(&pairs, &used, n);
+        used.retain(|&p| reach[pairs[p].edge.source] && reach[pairs[p].edge.target]);
+        for v in 0..n {
+            if placed[v] && !reach[v] {
+                placed[v] = false;
+                dropped.push((
+                    v,
+                    format!(
+                        "scan {}'s fit to the others did not hold at fine scale (its surfaces do not lie on theirs)",
+                        v + 1
+                    ),
+                ));
+            }
+        }
+        let refined = refine_placed(prepared, config, pool, &pairs, &used, &placed, &poses);
+        break (placed, used, refined);
     };
 
     let edges: Vec<EdgeEstimate> = used
@@ -206,26 +154,16 @@ pub(crate) fn register_unordered(
         .collect();
     let checks = used
         .iter()
-        .map(|&p| {
-            let Edge {
-                source: s,
-                target: t,
-            } = pairs[p].edge;
-            let (ws, wt) = (refined[s].expect("placed"), refined[t].expect("placed"));
-            let centred = Rigid::from_matrix(&(invert_rigid(&wt) * ws));
-            check_edge(
-                prepared.refine_clouds(),
-                pairs[p].edge,
-                &centred,
-                prepared.eps(),
-            )
-        })
+        .map(|&p| measure(prepared, &pairs[p], &refined))
         .collect();
     let unplaced: Vec<Unplaced> = (0..n)
         .filter(|&v| !placed[v])
         .map(|v| Unplaced {
             view: v,
-            reason: unplaced_reason(v, &pairs, &chosen),
+            reason: dropped.iter().find(|(d, _)| *d == v).map_or_else(
+                || unplaced_reason(v, &pairs, &chosen, &rejected),
+                |(_, r)| r.clone(),
+            ),
         })
         .collect();
     let poses = (0..n)
@@ -256,6 +194,172 @@ pub(crate) fn register_unordered(
         eps: prepared.eps(),
         shift: prepared.shift(),
     })
+}
+
+/// The verdict's measures of a pair at refined poses.
+fn measure(prepared: &PreparedProblem, pair: &Pair, refined: &[Option<Transform>]) -> EdgeCheck {
+    let Edge {
+        source: s,
+        target: t,
+    } = pair.edge;
+    let (ws, wt) = (refined[s].expect("placed"), refined[t].expect("placed"));
+    check_edge(
+        prepared.refine_clouds(),
+        pair.edge,
+        &Rigid::from_matrix(&(invert_rigid(&wt) * ws)),
+        prepared.eps(),
+    )
+}
+
+/// The scans connected to scan 0 through the `used` pairs.
+fn reachable(pairs: &[Pair], used: &[usize], n: usize) -> Vec<bool> {
+    let mut reach = vec![false; n];
+    reach[0] = true;
+    let mut grew = true;
+    while grew {
+        grew = false;
+        for &p in used {
+            let Edge {
+                source: s,
+                target: t,
+            } = pairs[p].edge;
+            if reach[s] != reach[t] {
+                reach[s] = true;
+                reach[t] = true;
+                grew = true;
+            }
+        }
+    }
+    reach
+}
+
+/// The maximum spanning tree (by overlap) of the verified, not rejected pairs from scan 0:
+/// which scans it places, the pairs used (tree and agreeing, well-overlapping closures) and
+/// the poses (centred, into scan 0's frame) along the tree.
+fn place(
+    pairs: &[Pair],
+    chosen: &[Option<usize>],
+    rejected: &[bool],
+    n: usize,
+    tolerance: f64,
+) -> (Vec<bool>, Vec<usize>, Vec<Option<Transform>>) {
+    let pose_of = |p: usize| pairs[p].poses[chosen[p].expect("verified")];
+    let mut order: Vec<usize> = (0..pairs.len())
+        .filter(|&p| chosen[p].is_some() && !rejected[p])
+        .collect();
+    order.sort_by(|&a, &b| pose_of(b).1.total_cmp(&pose_of(a).1).then(a.cmp(&b)));
+    let mut component: Vec<usize> = (0..n).collect();
+    fn find(c: &mut [usize], v: usize) -> usize {
+        let mut r = v;
+        while c[r] != r {
+            r = c[r];
+        }
+        c[v] = r;
+        r
+    }
+    let mut tree = Vec::new();
+    for &p in &order {
+        let (a, b) = (
+            find(&mut component, pairs[p].edge.source),
+            find(&mut component, pairs[p].edge.target),
+        );
+        if a != b {
+            component[a.max(b)] = a.min(b);
+            tree.push(p);
+        }
+    }
+    let root = find(&mut component, 0);
+    let placed: Vec<bool> = (0..n).map(|v| find(&mut component, v) == root).collect();
+    let mut poses: Vec<Option<Transform>> = vec![None; n];
+    poses[0] = Some(Transform::identity());
+    let mut grew = true;
+    while grew {
+        grew = false;
+        for &p in &tree {
+            let Edge {
+                source: s,
+                target: t,
+            } = pairs[p].edge;
+            let t_ts = pose_of(p).0;
+            match (poses[s], poses[t]) {
+                (Some(ws), None) => {
+                    poses[t] = Some(ws * invert_rigid(&t_ts));
+                    grew = true;
+                }
+                (None, Some(wt)) => {
+                    poses[s] = Some(wt * t_ts);
+                    grew = true;
+                }
+                _ => {}
+            }
+        }
+    }
+    let mut used = tree.clone();
+    for &p in &order {
+        if tree.contains(&p) || pose_of(p).1 < CLOSURE_MIN_OVERLAP {
+            continue;
+        }
+        let Edge {
+            source: s,
+            target: t,
+        } = pairs[p].edge;
+        if let (Some(ws), Some(wt)) = (poses[s], poses[t]) {
+            let implied = invert_rigid(&wt) * ws;
+            let own = pose_of(p).0;
+            if rotation_error_deg(&implied, &own) < CLOSURE_DEGREES
+                && translation_error(&implied, &own) < tolerance
+            {
+                used.push(p);
+            }
+        }
+    }
+    used.sort_unstable();
+    (placed, used, poses)
+}
+
+/// The poses (centred, into scan 0's frame) of the placed scans after the joint ICP over the
+/// `used` pairs (the start poses when refinement is off); `None` for the others.
+fn refine_placed(
+    prepared: &PreparedProblem,
+    config: &Config,
+    pool: &rayon::ThreadPool,
+    pairs: &[Pair],
+    used: &[usize],
+    placed: &[bool],
+    poses: &[Option<Transform>],
+) -> Vec<Option<Transform>> {
+    let n = placed.len();
+    let mut all: Vec<Option<Transform>> = (0..n).map(|v| poses[v].filter(|_| placed[v])).collect();
+    if config.refine_iterations == 0 {
+        return all;
+    }
+    let full = prepared.refine_clouds();
+    let index: Vec<usize> = (0..n).filter(|&v| placed[v]).collect();
+    let local = |v: usize| index.iter().position(|&x| x == v).expect("placed");
+    let clouds: Vec<_> = index.iter().map(|&v| &full[v]).collect();
+    let edges: Vec<Edge> = used
+        .iter()
+        .map(|&p| Edge {
+            source: local(pairs[p].edge.source),
+            target: local(pairs[p].edge.target),
+        })
+        .collect();
+    let start_poses: Vec<Rigid> = index
+        .iter()
+        .map(|&v| Rigid::from_matrix(&poses[v].expect("placed")))
+        .collect();
+    let out = refine_poses(
+        &clouds,
+        &edges,
+        start_poses,
+        prepared.eps(),
+        config.refine_iterations,
+        pool,
+    );
+    for (k, &v) in index.iter().enumerate() {
+        all[v] = Some(out[k].to_matrix());
+    }
+    all
 }
 
 /// Every pair's hypotheses, scored by overlap, in parallel (results in pair order).
@@ -357,7 +461,12 @@ pub(crate) fn loop_tolerance(prepared: &PreparedProblem) -> f64 {
 }
 
 /// Why scan `v` could not be placed.
-fn unplaced_reason(v: usize, pairs: &[Pair], chosen: &[Option<usize>]) -> String {
+fn unplaced_reason(
+    v: usize,
+    pairs: &[Pair],
+    chosen: &[Option<usize>],
+    rejected: &[bool],
+) -> String {
     let mine: Vec<usize> = (0..pairs.len())
         .filter(|&p| pairs[p].edge.source == v || pairs[p].edge.target == v)
         .collect();
@@ -365,7 +474,7 @@ fn unplaced_reason(v: usize, pairs: &[Pair], chosen: &[Option<usize>]) -> String
         .iter()
         .filter_map(|&p| pairs[p].poses.first().map(|h| h.1))
         .fold(0.0, f64::max);
-    if mine.iter().any(|&p| chosen[p].is_some()) {
+    if mine.iter().any(|&p| chosen[p].is_some() && !rejected[p]) {
         format!(
             "scan {} overlaps others only in a group not connected to scan 1",
             v + 1

@@ -40,6 +40,91 @@ fn unit_vector<R: Rng + ?Sized>(rng: &mut R) -> [f64; 3] {
     }
 }
 
+/// Views of a seeded shape taken from all around it: `count` views looking from directions
+/// `360 / count` degrees apart around a tilted axis (neighbours overlap more the more views
+/// there are), each of `points_per_view` points and moved by a random rigid motion.
+#[derive(Clone, Debug)]
+pub struct SyntheticViews {
+    /// The views, each in its own frame.
+    pub clouds: Vec<PointCloud>,
+    /// Each view's ground-truth view-to-world pose (`x_world = pose x_view`).
+    pub poses: Vec<Transform>,
+}
+
+/// `count` views around a seeded shape (see [`SyntheticViews`]).
+pub fn views_around(seed: u64, count: usize, points_per_view: usize) -> SyntheticViews {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x7669_6577);
+    let surface = shape(&mut rng);
+    let directions: Vec<[f64; 3]> = (0..count)
+        .map(|i| {
+            let a = (i as f64 * 360.0 / count as f64 + rng.random_range(-5.0..5.0)).to_radians();
+            let e: f64 = rng.random_range(-0.3..0.3);
+            [a.cos() * e.cos(), e.sin(), a.sin() * e.cos()]
+        })
+        .collect();
+    let motions: Vec<Transform> = (0..count)
+        .map(|_| random_rigid(&mut rng, SHAPE_SIZE))
+        .collect();
+    let clouds = directions
+        .iter()
+        .zip(&motions)
+        .map(|(v, m)| view(&surface, *v, points_per_view, &mut rng).transformed(m))
+        .collect();
+    SyntheticViews {
+        clouds,
+        poses: motions.iter().map(invert_rigid).collect(),
+    }
+}
+
+/// A seeded closed surface: `surface(u)` is the point in unit direction `u`.
+fn shape(rng: &mut ChaCha8Rng) -> impl Fn([f64; 3]) -> [f64; 3] {
+    let bumps: Vec<Bump> = (0..66)
+        .map(|i| match i {
+            0..6 => Bump {
+                centre: unit_vector(rng),
+                height: rng.random_range(0.4..0.7),
+                width: rng.random_range(0.15..0.25),
+            },
+            6..14 => Bump {
+                centre: unit_vector(rng),
+                height: rng.random_range(-0.2..0.45),
+                width: rng.random_range(0.25..0.5),
+            },
+            _ => Bump {
+                centre: unit_vector(rng),
+                height: rng.random_range(-0.08..0.12),
+                width: rng.random_range(0.08..0.2),
+            },
+        })
+        .collect();
+    let axes = [1.0, 0.6, 0.42];
+    move |u: [f64; 3]| -> [f64; 3] {
+        let mut r = 1.0 + 0.3 * u[0] + 0.2 * u[1] + 0.15 * u[0] * u[2];
+        for b in &bumps {
+            let d2: f64 = (0..3).map(|k| (u[k] - b.centre[k]).powi(2)).sum();
+            r += b.height * (-d2 / (b.width * b.width)).exp();
+        }
+        std::array::from_fn(|k| 0.5 * SHAPE_SIZE * axes[k] * r * u[k] / 1.3)
+    }
+}
+
+/// The points of `surface` facing the viewer at direction `v` (a bit beyond a hemisphere).
+fn view(
+    surface: &impl Fn([f64; 3]) -> [f64; 3],
+    v: [f64; 3],
+    points: usize,
+    rng: &mut ChaCha8Rng,
+) -> PointCloud {
+    let mut pts = Vec::with_capacity(points);
+    while pts.len() < points {
+        let u = unit_vector(rng);
+        if u[0] * v[0] + u[1] * v[1] + u[2] * v[2] > -0.2 {
+            pts.push(surface(u));
+        }
+    }
+    PointCloud::new(pts)
+}
+
 /// Three views of about `points_per_view` points each of a seeded shape; the views overlap
 /// pairwise by about 40 to 70 %.
 pub fn three_views(seed: u64, points_per_view: usize) -> SyntheticProblem {
@@ -111,6 +196,26 @@ pub fn three_views(seed: u64, points_per_view: usize) -> SyntheticProblem {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn views_around_are_seeded_and_posed() {
+        let a = views_around(2, 5, 500);
+        assert_eq!(a.clouds.len(), 5);
+        assert_eq!(a.clouds, views_around(2, 5, 500).clouds);
+        assert_ne!(a.clouds, views_around(3, 5, 500).clouds);
+        // Every view, put in the world frame, lies on the same shape: near view 0's points.
+        let world: Vec<PointCloud> = a
+            .clouds
+            .iter()
+            .zip(&a.poses)
+            .map(|(c, p)| c.transformed(p))
+            .collect();
+        let (lo, hi) = world[1].bounds();
+        let (lo0, hi0) = world[0].bounds();
+        for k in 0..3 {
+            assert!((lo[k] - lo0[k]).abs() < 0.06 && (hi[k] - hi0[k]).abs() < 0.06);
+        }
+    }
 
     #[test]
     fn views_are_seeded_and_the_ground_truth_closes_the_loop() {

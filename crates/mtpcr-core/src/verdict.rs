@@ -20,6 +20,12 @@ pub const MIN_OVERLAP: f64 = 0.1;
 /// overlapping points, relative to eps) is at most this.
 pub const MAX_RESIDUAL: f64 = 0.25;
 
+/// With three or more edges, an edge is trusted only if its residual is at most this many
+/// times the median residual of all edges: pairs of one scan set share the scans' noise, so
+/// a pose whose surfaces cross stands out even where the absolute limit is lenient (clean,
+/// smooth surfaces).
+pub const RELATIVE_RESIDUAL: f64 = 4.0;
+
 /// The measures of one edge at the returned transform.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct EdgeCheck {
@@ -90,22 +96,45 @@ fn median(v: &mut [f64]) -> Option<f64> {
     Some(v[v.len() / 2])
 }
 
+/// Why each edge is not trusted (`None`: trusted), see [`MIN_OVERLAP`], [`MAX_RESIDUAL`]
+/// and [`RELATIVE_RESIDUAL`].
+pub(crate) fn doubts(edges: &[EdgeCheck]) -> Vec<Option<String>> {
+    let mut residuals: Vec<f64> = edges.iter().map(|e| e.residual).collect();
+    let typical = if edges.len() >= 3 {
+        median(&mut residuals)
+    } else {
+        None
+    };
+    edges
+        .iter()
+        .map(|e| {
+            let name = format!("{} -> {}", e.source + 1, e.target + 1);
+            if e.overlap < MIN_OVERLAP {
+                Some(format!(
+                    "clouds {name} overlap by {:.2} only (at least {MIN_OVERLAP} expected)",
+                    e.overlap
+                ))
+            } else if e.residual > MAX_RESIDUAL {
+                Some(format!(
+                    "clouds {name} meet but do not lie on each other (residual {:.2} of eps, at most {MAX_RESIDUAL} expected)",
+                    e.residual
+                ))
+            } else if typical.is_some_and(|m| e.residual > RELATIVE_RESIDUAL * m) {
+                Some(format!(
+                    "clouds {name} lie on each other far less closely than the other pairs (residual {:.3} of eps against a median of {:.3})",
+                    e.residual,
+                    typical.unwrap_or(0.0)
+                ))
+            } else {
+                None
+            }
+        })
+        .collect()
+}
+
 /// The verdict from the edges' measures (names views from 1 in the reasons).
 pub(crate) fn judge(edges: Vec<EdgeCheck>, mut reasons: Vec<String>) -> Verdict {
-    for e in &edges {
-        let name = format!("{} -> {}", e.source + 1, e.target + 1);
-        if e.overlap < MIN_OVERLAP {
-            reasons.push(format!(
-                "clouds {name} overlap by {:.2} only (at least {MIN_OVERLAP} expected)",
-                e.overlap
-            ));
-        } else if e.residual > MAX_RESIDUAL {
-            reasons.push(format!(
-                "clouds {name} meet but do not lie on each other (residual {:.2} of eps, at most {MAX_RESIDUAL} expected)",
-                e.residual
-            ));
-        }
-    }
+    reasons.extend(doubts(&edges).into_iter().flatten());
     Verdict {
         confident: reasons.is_empty(),
         reasons,

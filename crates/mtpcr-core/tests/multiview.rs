@@ -1,0 +1,128 @@
+//! Two scans, scans in loop order and scans in no known order, on seeded synthetic views of
+//! one shape; a scan of another shape is left unplaced; unrelated clouds are not trusted.
+
+use mtpcr_core::eval::score_poses;
+use mtpcr_core::se3::invert_rigid;
+use mtpcr_core::synthetic::views_around;
+use mtpcr_core::{register, Config, Order, PointCloud, Transform};
+
+/// Largest rotation error accepted per scan on clean synthetic views, degrees.
+const MAX_ROTATION_DEG: f64 = 1.0;
+/// Size of the synthetic shape (its bounding-box side is about this).
+const SHAPE: f64 = 0.15;
+
+fn config(seed: u64) -> Config {
+    Config {
+        seed: Some(seed),
+        ..Config::default()
+    }
+}
+
+fn assert_placed(poses: &[Option<Transform>], truth: &[Transform], what: &str) {
+    let s = score_poses(poses, truth, SHAPE);
+    for (k, d) in s.rot_deg.iter().enumerate() {
+        let d = d.unwrap_or_else(|| panic!("{what}: scan {k} not placed"));
+        assert!(
+            d < MAX_ROTATION_DEG,
+            "{what}: scan {k} is {d:.2} degrees off"
+        );
+    }
+}
+
+#[test]
+fn two_scans_are_one_pair() {
+    let v = views_around(11, 6, 4000);
+    let r = register(&v.clouds[..2], &config(1), None).unwrap();
+    assert_eq!(r.edges.len(), 1);
+    assert_eq!((r.edges[0].source, r.edges[0].target), (0, 1));
+    assert_eq!(r.loop_residual(), None);
+    assert_placed(&r.poses, &v.poses[..2], "pair");
+    let gt = invert_rigid(&v.poses[1]) * v.poses[0];
+    let t = r.t_target_source(1, 0).unwrap();
+    assert!(mtpcr_core::se3::rotation_error_deg(&t, &gt) < MAX_ROTATION_DEG);
+    assert!(r.verdict.confident, "{:?}", r.verdict);
+}
+
+#[test]
+fn scans_in_no_known_order_are_all_placed() {
+    let v = views_around(12, 6, 4000);
+    // Shuffled: no neighbour in the list is a neighbour on the shape.
+    let order = [0usize, 3, 1, 4, 2, 5];
+    let clouds: Vec<PointCloud> = order.iter().map(|&k| v.clouds[k].clone()).collect();
+    let truth: Vec<Transform> = order.iter().map(|&k| v.poses[k]).collect();
+    let r = register(&clouds, &config(2), None).unwrap();
+    assert!(r.unplaced.is_empty(), "{:?}", r.unplaced);
+    assert_placed(&r.poses, &truth, "unordered");
+    assert!(r.history.is_empty(), "no evolution in this mode");
+    assert!(r.verdict.confident, "{:?}", r.verdict);
+}
+
+#[test]
+fn scans_given_in_loop_order_are_one_loop() {
+    let v = views_around(13, 5, 4000);
+    let c = Config {
+        order: Order::Given,
+        ..config(3)
+    };
+    let r = register(&v.clouds, &c, None).unwrap();
+    assert_eq!(r.edges.len(), 5);
+    assert_eq!(r.task_names.len(), 10);
+    assert!(
+        r.loop_residual().unwrap() < 1e-9,
+        "the refinement closes the loop"
+    );
+    assert_placed(&r.poses, &v.poses, "ring of five");
+}
+
+#[test]
+fn a_scan_of_another_object_is_left_unplaced() {
+    let v = views_around(14, 5, 4000);
+    // Another object of the same size: the near half of a wavy torus.
+    let stranger = PointCloud::new(
+        (0..4000)
+            .map(|i| {
+                let (u, v) = (
+                    i as f64 * 0.618_034 * std::f64::consts::TAU,
+                    (i as f64 / 4000.0) * std::f64::consts::PI,
+                );
+                let r = 0.02 + 0.004 * (5.0 * u).sin();
+                [
+                    (0.05 + r * v.cos()) * u.cos(),
+                    (0.05 + r * v.cos()) * u.sin(),
+                    r * v.sin(),
+                ]
+            })
+            .collect(),
+    );
+    let mut clouds = v.clouds.clone();
+    clouds.insert(2, stranger);
+    let r = register(&clouds, &config(4), None).unwrap();
+    assert_eq!(r.unplaced.len(), 1, "{:?}", r.unplaced);
+    assert_eq!(r.unplaced[0].view, 2);
+    assert!(
+        r.unplaced[0].reason.contains("scan 3"),
+        "{}",
+        r.unplaced[0].reason
+    );
+    assert!(r.poses[2].is_none());
+    let placed: Vec<Option<Transform>> = r
+        .poses
+        .iter()
+        .enumerate()
+        .filter(|(k, _)| *k != 2)
+        .map(|(_, p)| *p)
+        .collect();
+    assert_placed(&placed, &v.poses, "the others");
+    assert!(!r.verdict.confident);
+}
+
+#[test]
+fn unrelated_clouds_are_not_trusted() {
+    let clouds: Vec<PointCloud> = [21, 22, 23]
+        .iter()
+        .map(|&s| views_around(s, 3, 4000).clouds[0].clone())
+        .collect();
+    let r = register(&clouds, &config(5), None).unwrap();
+    assert!(!r.verdict.confident, "{:?}", r.verdict);
+    assert!(!r.verdict.reasons.is_empty());
+}
