@@ -23,6 +23,9 @@ argument or setting), ``TypeError`` for an unknown setting, ``OSError`` for file
 be read or written, ``RuntimeError`` for anything else.
 
 The engine is Rust (``mtpcr._mtpcr``); it runs without holding the GIL.
+
+Many registrations, or the experiment suites, on Ray (this machine or a cluster):
+``mtpcr.distributed`` (``pip install "mtpcr[ray]"``; not imported by ``import mtpcr``).
 """
 
 from ._mtpcr import (

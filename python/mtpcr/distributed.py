@@ -31,6 +31,7 @@ function needs it.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import hashlib
 import json
 import math
@@ -323,7 +324,16 @@ def _digest(arrays: Sequence[np.ndarray], settings: Mapping[str, Any]) -> str:
 
 
 def _node() -> str:
-    return socket.gethostname()
+    """The host, and the Ray node's id (its first 8 digits) inside a Ray worker: several
+    nodes may share a host."""
+    name = socket.gethostname()
+    ray = sys.modules.get("ray")
+    if ray is not None and ray.is_initialized():
+        try:
+            name += "/" + ray.get_runtime_context().get_node_id()[:8]
+        except Exception:
+            pass
+    return name
 
 
 # --------------------------------------------------------------------------------------------
@@ -576,8 +586,7 @@ def register_batch(
         for index, key, name, settings, clouds in work:
             previous = done.get(key)
             if previous is not None and previous.ok:
-                previous.index = index
-                out[index] = previous
+                out[index] = dataclasses.replace(previous, index=index)
                 bar.done += 1
             else:
                 todo.append((index, key, name, settings, clouds))

@@ -20,8 +20,11 @@ import mtpcr
 
 from conftest import REPO_ROOT, three_views
 
-# No usage report to Ray's servers, from this process or the workers it starts.
+# No usage report to Ray's servers, from this process or the workers it starts; and a
+# single-node instance on 127.0.0.1 (else Ray binds and connects to the machine's address).
+# Read when ray is imported.
 os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
+os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
 ray = pytest.importorskip("ray", reason="Ray is not installed (pip install 'mtpcr[ray]')")
 
 from mtpcr import distributed  # noqa: E402
@@ -40,15 +43,10 @@ SMALL = {
 
 @pytest.fixture(scope="module", autouse=True)
 def ray_session():
-    """One local Ray instance (two CPUs, loopback only) for the whole module."""
+    """One local Ray instance (two CPUs, on 127.0.0.1) for the whole module."""
     if ray.is_initialized():
         ray.shutdown()
-    ray.init(
-        num_cpus=2,
-        include_dashboard=False,
-        _node_ip_address="127.0.0.1",
-        log_to_driver=False,
-    )
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
     yield
     ray.shutdown()
 
@@ -178,7 +176,7 @@ def test_a_results_file_resumes(scan_sets, tmp_path):
     with open(path, "a") as f:
         f.write('{"ok": true, "key": "half')
     calls = []
-    second = [first[2], distributed.Item(scan_sets[2], seed=4), *first[:2]]
+    second = [first[2], distributed.Item(scan_sets[2], seed=4), *first[:2], first[0]]
     again = distributed.register_batch(
         second,
         config=SMALL,
@@ -188,9 +186,10 @@ def test_a_results_file_resumes(scan_sets, tmp_path):
     )
     # Only the new item and the failed one ran again; the others came from the file.
     assert sorted(calls) == [0, 1]
-    assert [r.ok for r in again] == [False, True, True, True]
-    assert [r.index for r in again] == [0, 1, 2, 3]
+    assert [r.ok for r in again] == [False, True, True, True, True]
+    assert [r.index for r in again] == [0, 1, 2, 3, 4]
     assert_same(again[2], results[0])
+    assert_same(again[4], results[0])
     assert_same(again[3], results[1])
     assert_same(again[1], local(scan_sets[2], 4))
     stored = distributed.read_results(path)
