@@ -6,6 +6,8 @@
 # $MTPCR_SHARED_DIR) and skip with a reason when it is absent.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+# Ray (tests of mtpcr.distributed) sends no usage statistics.
+export RAY_USAGE_STATS_ENABLED=0
 
 PYTHON="${PYTHON:-python3}"
 VENV=target/py-venv
@@ -13,9 +15,10 @@ export PIP_DISABLE_PIP_VERSION_CHECK=1 PIP_NO_INPUT=1 PIP_PROGRESS_BAR=off
 
 echo "== fresh venv in $VENV ($("$PYTHON" --version))"
 "$PYTHON" -m venv --clear "$VENV"
-echo "== pip install . pytest"
+echo "== pip install . pytest ruff ray"
 start=$(date +%s)
-"$VENV/bin/python" -m pip install . pytest ruff
+# ray: for the tests of mtpcr.distributed (python/tests/test_distributed.py, marker `ray`).
+"$VENV/bin/python" -m pip install . pytest ruff ray
 echo "   installed in $(( $(date +%s) - start )) s"
 echo "== ruff"
 "$VENV/bin/python" -m ruff check python

@@ -23,6 +23,9 @@ argument or setting), ``TypeError`` for an unknown setting, ``OSError`` for file
 be read or written, ``RuntimeError`` for anything else.
 
 The engine is Rust (``mtpcr._mtpcr``); it runs without holding the GIL.
+
+Many registrations, or the experiment suites, on Ray (this machine or a cluster):
+``mtpcr.distributed`` (``pip install "mtpcr[ray]"``; not imported by ``import mtpcr``).
 """
 
 from ._mtpcr import (
@@ -32,6 +35,7 @@ from ._mtpcr import (
     Problem,
     Registration,
     __version__,
+    describe_suite,
     evaluate,
     find_shared_dir,
     load_problem,
@@ -49,6 +53,7 @@ __all__ = [
     "Problem",
     "Registration",
     "__version__",
+    "describe_suite",
     "evaluate",
     "find_shared_dir",
     "load_problem",

@@ -354,6 +354,11 @@ def evaluate(
     ``"sharing"``, ``"sampling"``) on problem files: one record per run, the same as the
     lines ``mtpcr experiment`` writes to ``runs.jsonl``."""
 
+def describe_suite(suite: str) -> dict[str, Any]:
+    """What an experiment suite runs: ``name``, ``default_runs``, ``paper_problems`` (problem
+    names, or None for every problem) and ``variants`` in run order (dicts with ``key``,
+    ``label``, ``settings`` and ``noise``)."""
+
 def find_shared_dir() -> str | None:
     """The shared data folder (``$MTPCR_SHARED_DIR``, else the nearest ``shared/`` beside the
     current directory or an ancestor), or None."""

@@ -87,3 +87,15 @@ def test_evaluate_rejects_unknown_suites_and_variants(problem_file):
         "accuracy", [problem_file], runs=3, generations=1, on_run=lambda record: False
     )
     assert len(stops) == 1, "on_run returning False stops after the first run"
+
+
+def test_describe_suite_lists_the_variants_in_run_order():
+    info = mtpcr.describe_suite("accuracy")
+    assert info["name"] == "accuracy" and info["default_runs"] == 10
+    assert [v["key"] for v in info["variants"]] == ["mtpcr-default", "mtpcr-paper"]
+    assert info["variants"][1]["settings"] == mtpcr.Config.paper().to_dict()
+    assert info["paper_problems"] is None
+    assert mtpcr.describe_suite("sharing")["paper_problems"] == ["bunny-c"]
+    assert mtpcr.describe_suite("noise")["variants"][1]["noise"] == 0.02
+    with pytest.raises(ValueError, match="unknown suite"):
+        mtpcr.describe_suite("acuracy")

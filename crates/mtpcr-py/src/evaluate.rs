@@ -104,6 +104,36 @@ pub(crate) fn evaluate<'py>(
     Ok(records)
 }
 
+/// What an experiment suite runs: ``name``, ``default_runs`` (seeds ``0..default_runs``
+/// unless told otherwise), ``paper_problems`` (the problem names the paper ran it on, used by
+/// ``mtpcr experiment`` when no problems are given; ``None``: every problem) and
+/// ``variants``, in run order: dicts with ``key``, ``label``, ``settings`` (the Config as a
+/// dict, before the run's seed and ``generations`` override) and ``noise`` (the sigma added to
+/// the scans, or ``None``). An unknown suite raises ``ValueError``.
+#[pyfunction]
+pub(crate) fn describe_suite<'py>(py: Python<'py>, suite: &str) -> PyResult<Bound<'py, PyAny>> {
+    let suite = Suite::from_name(suite).map_err(to_py)?;
+    let variants: Vec<serde_json::Value> = suite
+        .variants()
+        .iter()
+        .map(|v| {
+            serde_json::json!({
+                "key": v.key,
+                "label": v.label,
+                "settings": v.config,
+                "noise": v.noise,
+            })
+        })
+        .collect();
+    let info = serde_json::json!({
+        "name": suite.name(),
+        "default_runs": suite.default_runs(),
+        "paper_problems": suite.paper_problems(),
+        "variants": variants,
+    });
+    json_text_to_py(py, &info.to_string())
+}
+
 /// The team's shared data folder (holding ``problems/`` and ``data/``) as a str, or ``None``:
 /// ``$MTPCR_SHARED_DIR`` when set, else the nearest ``shared/`` folder beside the current
 /// directory or one of its ancestors.
