@@ -16,7 +16,7 @@ for variant in "${@:-paper mfea gmfea default}"; do
       mfea) flags=(--paper --method mfea) ;;
       gmfea) flags=(--paper --method gmfea) ;;
       # The default setting before feature hypotheses and early stopping existed.
-      default) flags=(--hypotheses 0 --stop-when-restarts-agree false) ;;
+      default) flags=(--order given --hypotheses 0 --stop-when-restarts-agree false --max-sample-points 0) ;;
       *) echo "unknown variant $v" >&2; exit 2 ;;
     esac
     echo "== $v"

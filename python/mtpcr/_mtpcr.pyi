@@ -47,6 +47,7 @@ class Config:
         population_size: int = ...,
         generations: int = ...,
         sample_ratio: float = ...,
+        max_sample_points: int = ...,
         sampling: _Sampling = ...,
         p_intra: float = ...,
         p_inter: float = ...,
@@ -103,6 +104,12 @@ class Config:
     @property
     def sample_ratio(self) -> float:
         """Fraction of each cloud's points kept by downsampling, in (0, 1]. Paper: 0.05."""
+    @property
+    def max_sample_points(self) -> int:
+        """Most points kept per cloud by downsampling (0 = no limit, only
+        `sample_ratio`); with a limit, dense clouds are thinned evenly before farthest-
+        point sampling, so the cost no longer grows with the scan's size (beyond the
+        paper). Paper: 0."""
     @property
     def sampling(self) -> _Sampling:
         """Downsampling method: `farthest` (farthest-point sampling) or `random`. Paper:
@@ -292,6 +299,7 @@ def register(
     population_size: int = ...,
     generations: int = ...,
     sample_ratio: float = ...,
+    max_sample_points: int = ...,
     sampling: _Sampling = ...,
     p_intra: float = ...,
     p_inter: float = ...,

@@ -43,6 +43,8 @@ pub struct SettingsArgs {
     pub generations: Option<usize>,
     #[arg(long, value_name = "RATIO")]
     pub sample_ratio: Option<f64>,
+    #[arg(long, value_name = "N")]
+    pub max_sample_points: Option<usize>,
     #[arg(long, value_name = "METHOD", value_parser = parse_name::<Sampling>)]
     pub sampling: Option<Sampling>,
     #[arg(long, value_name = "P")]
@@ -109,6 +111,7 @@ impl SettingsArgs {
             population_size,
             generations,
             sample_ratio,
+            max_sample_points,
             sampling,
             p_intra,
             p_inter,

@@ -17,6 +17,10 @@ use std::time::Instant;
 
 /// Fewest points a cloud may have (and fewest kept by downsampling).
 pub const MIN_POINTS: usize = 10;
+/// With `max_sample_points`, farthest-point sampling starts from an even subset of at most
+/// this many times the sample (the farthest points of a dense scan are the same, and the
+/// cost no longer grows with the scan's size).
+const PRE_SAMPLE: usize = 16;
 
 /// The clouds of a view graph, downsampled, centred and indexed (see the module docs).
 #[derive(Debug)]
@@ -29,6 +33,7 @@ pub struct PreparedProblem {
     eps: f64,
     shift: f64,
     sample_ratio: f64,
+    max_sample_points: usize,
     sampling: Sampling,
     search: SearchMethod,
     aiding_cap_ratio: f64,
@@ -76,10 +81,23 @@ impl PreparedProblem {
                 .par_iter()
                 .enumerate()
                 .map(|(i, c)| {
-                    let count = ((c.len() as f64 * config.sample_ratio).round() as usize)
+                    let mut count = ((c.len() as f64 * config.sample_ratio).round() as usize)
                         .max(MIN_POINTS)
                         .min(c.len());
+                    if config.max_sample_points > 0 {
+                        count = count.min(config.max_sample_points.max(MIN_POINTS));
+                    }
                     match config.sampling {
+                        // With a cap, a huge cloud is first thinned to an even stride subset
+                        // of PRE_SAMPLE times the sample, so sampling costs the same at any
+                        // input size.
+                        Sampling::Farthest
+                            if config.max_sample_points > 0 && c.len() > PRE_SAMPLE * count =>
+                        {
+                            let stride = c.len().div_ceil(PRE_SAMPLE * count);
+                            let thin: Vec<usize> = (0..c.len()).step_by(stride).collect();
+                            c.select(&thin).farthest_point_sample(count)
+                        }
                         Sampling::Farthest => c.farthest_point_sample(count),
                         Sampling::Random => {
                             let seed = config.seed.unwrap_or(0) ^ (0x5eed_0000 + i as u64);
@@ -166,6 +184,7 @@ impl PreparedProblem {
             eps,
             shift,
             sample_ratio: config.sample_ratio,
+            max_sample_points: config.max_sample_points,
             sampling: config.sampling,
             search,
             aiding_cap_ratio: config.aiding_cap_ratio,
@@ -249,6 +268,10 @@ impl PreparedProblem {
     pub(crate) fn check_prepared_with(&self, config: &Config) -> Result<()> {
         let differs = [
             ("sample_ratio", config.sample_ratio != self.sample_ratio),
+            (
+                "max_sample_points",
+                config.max_sample_points != self.max_sample_points,
+            ),
             ("sampling", config.sampling != self.sampling),
             ("search", config.search != self.search),
             (
