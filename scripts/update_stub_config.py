@@ -36,7 +36,13 @@ def main() -> None:
     for name, doc in docs.items():
         props.append("    @property")
         props.append(f"    def {name}(self) -> {types[name]}:")
-        lines = textwrap.wrap(doc, 88, initial_indent='        """', subsequent_indent="        ")
+        lines = textwrap.wrap(
+            doc,
+            88,
+            initial_indent='        """',
+            subsequent_indent="        ",
+            break_on_hyphens=False,
+        )
         lines[-1] += '"""'
         props += lines
     text = STUB.read_text()

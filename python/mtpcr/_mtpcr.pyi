@@ -107,9 +107,9 @@ class Config:
     @property
     def max_sample_points(self) -> int:
         """Most points kept per cloud by downsampling (0 = no limit, only
-        `sample_ratio`); with a limit, dense clouds are thinned evenly before farthest-
-        point sampling, so the cost no longer grows with the scan's size (beyond the
-        paper). Paper: 0."""
+        `sample_ratio`); with a limit, dense clouds are thinned evenly before
+        farthest-point sampling, so the cost no longer grows with the scan's size
+        (beyond the paper). Paper: 0."""
     @property
     def sampling(self) -> _Sampling:
         """Downsampling method: `farthest` (farthest-point sampling) or `random`. Paper:
