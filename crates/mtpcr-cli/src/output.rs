@@ -238,8 +238,12 @@ pub fn result_json(rec: &RunRecord<'_>) -> serde_json::Value {
         "seed": r.seed,
         "settings": Config { seed: Some(r.seed), ..rec.config.clone() },
         "task_names": r.task_names,
+        "sampled_points": r.sampled_points,
+        "restarts_run": r.restarts_run,
+        "kept_restart": r.kept_restart + 1,
         "history": r.history,
-        "history_note": "best cost of each task per generation of the kept restart (the one with the lowest final original costs), before refinement",
+        "history_note": "best cost of each task per generation of the kept restart (kept_restart, numbered from 1: the lowest final original costs), before refinement; generations_run counts every restart's generations; restart_histories holds each restart's",
+        "restart_histories": r.restart_histories,
     })
 }
 
@@ -296,10 +300,11 @@ pub fn write_results(dir: &Path, rec: &RunRecord<'_>) -> CliResult<Vec<String>> 
     }
     write_ply(path("merged.ply"), &points, Some(&colors))?;
 
-    let restarts = rec.config.restarts;
-    let title = if restarts > 1 {
+    let run = rec.result.restart_histories.len();
+    let title = if run > 1 {
         format!(
-            "Best cost per generation of each task (the kept one of {restarts} restarts: the lowest final original costs)"
+            "Best cost per generation of each task: restart {} of the {run} run (lowest final original costs), others grey",
+            rec.result.kept_restart + 1
         )
     } else {
         "Best cost per generation of each task".to_string()
@@ -308,7 +313,8 @@ pub fn write_results(dir: &Path, rec: &RunRecord<'_>) -> CliResult<Vec<String>> 
     let with_history = !rec.result.history.is_empty();
     if with_history {
         plots::convergence_png(
-            &rec.result.history,
+            &rec.result.restart_histories,
+            rec.result.kept_restart,
             &rec.result.task_names,
             &title,
             &path("convergence.png"),

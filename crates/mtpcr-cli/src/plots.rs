@@ -77,14 +77,16 @@ fn text(e: impl std::fmt::Display) -> String {
 }
 
 /// `convergence.png`: the best cost of each task per generation (row 0 is the initial
-/// population) of the kept evolution; aiding tasks J1-a, J2-a, ... on the left, original
-/// tasks J1-o, J2-o, ... on the right. `title` says which evolution it is.
+/// population) of the kept restart `histories[kept]`, the other restarts in thin grey;
+/// aiding tasks J1-a, J2-a, ... on the left, original tasks J1-o, J2-o, ... on the right.
 pub fn convergence_png(
-    history: &[Vec<f64>],
+    histories: &[Vec<Vec<f64>>],
+    kept: usize,
     task_names: &[String],
     title: &str,
     path: &Path,
 ) -> CliResult<()> {
+    let history = histories.get(kept).map_or(&[][..], Vec::as_slice);
     if history.is_empty() {
         return Err(Failure(format!(
             "{}: the run has no history to plot",
@@ -104,7 +106,15 @@ pub fn convergence_png(
         ];
         let edges = task_names.len() / 2;
         for (k, panel) in panels.iter().enumerate() {
-            draw_costs(panel, history, task_names, (edges * k, edges), titles[k]).map_err(text)?;
+            draw_costs(
+                panel,
+                histories,
+                kept,
+                task_names,
+                (edges * k, edges),
+                titles[k],
+            )
+            .map_err(text)?;
         }
         Ok(())
     })
@@ -112,26 +122,45 @@ pub fn convergence_png(
 
 fn draw_costs<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
-    history: &[Vec<f64>],
+    histories: &[Vec<Vec<f64>>],
+    kept: usize,
     task_names: &[String],
     (first, count): (usize, usize),
     title: &str,
 ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
-    let series: Vec<Series> = (0..count)
-        .map(|k| Series {
-            label: task_names[first + k].clone(),
-            color: TASK_COLORS[k % TASK_COLORS.len()],
-            values: history.iter().map(|row| row[first + k]).collect(),
-        })
-        .collect();
+    let mut series = Vec::new();
+    for (_, history) in histories.iter().enumerate().filter(|(r, _)| *r != kept) {
+        for k in 0..count {
+            series.push(Series {
+                label: if series.is_empty() {
+                    format!("other restarts ({})", histories.len() - 1)
+                } else {
+                    String::new()
+                },
+                color: RGBColor(185, 185, 185),
+                values: history.iter().map(|row| row[first + k]).collect(),
+                thin: true,
+            });
+        }
+    }
+    let history = &histories[kept];
+    series.extend((0..count).map(|k| Series {
+        label: task_names[first + k].clone(),
+        color: TASK_COLORS[k % TASK_COLORS.len()],
+        values: history.iter().map(|row| row[first + k]).collect(),
+        thin: false,
+    }));
     draw_series(area, &series, title, (20, 17, 3))
 }
 
 /// One line of a chart: a value per generation (index 0 is the initial population).
 struct Series {
+    /// Legend text; empty: no legend entry.
     label: String,
     color: RGBColor,
     values: Vec<f64>,
+    /// Drawn one pixel wide (context lines).
+    thin: bool,
 }
 
 /// Lines over generations with a legend; `(caption, legend, stroke)` sizes in pixels.
@@ -171,15 +200,16 @@ fn draw_series<DB: DrawingBackend>(
         .draw()?;
     for s in series {
         let color = s.color;
-        chart
-            .draw_series(LineSeries::new(
-                s.values.iter().enumerate().map(|(g, &v)| (g as i32, v)),
-                color.stroke_width(stroke),
-            ))?
-            .label(s.label.clone())
-            .legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 24, y)], color.stroke_width(stroke))
+        let width = if s.thin { 1 } else { stroke };
+        let drawn = chart.draw_series(LineSeries::new(
+            s.values.iter().enumerate().map(|(g, &v)| (g as i32, v)),
+            color.stroke_width(width),
+        ))?;
+        if !s.label.is_empty() {
+            drawn.label(s.label.clone()).legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 24, y)], color.stroke_width(width))
             });
+        }
     }
     chart
         .configure_series_labels()
@@ -234,6 +264,7 @@ pub(crate) fn methods_convergence_png(
                         label: label.clone(),
                         color: METHOD_COLORS[m % METHOD_COLORS.len()],
                         values: history.iter().map(|row| row[task]).collect(),
+                        thin: false,
                     })
                     .collect();
                 let caption = format!("{} ({kind} task), mean over runs", task_names[task]);
@@ -502,19 +533,20 @@ fn draw_view<DB: DrawingBackend>(
     let y_ticks = tick_format(2.0 * hh, cy.abs() + hh);
     chart
         .configure_mesh()
-        .x_desc(view.x_desc)
-        .y_desc(view.y_desc)
+        .x_desc(format!("{} (data units)", view.x_desc))
+        .y_desc(format!("{} (data units)", view.y_desc))
         .axis_desc_style((FONT, 17))
         .label_style((FONT, 14))
         .x_label_formatter(&x_ticks)
         .y_label_formatter(&y_ticks)
-        .light_line_style(RGBColor(240, 240, 240))
-        .bold_line_style(RGBColor(220, 220, 220))
+        // No minor grid: the points are the picture.
+        .light_line_style(WHITE)
+        .bold_line_style(RGBColor(225, 225, 225))
         .draw()?;
     chart.draw_series(
         points
             .iter()
-            .map(|&(x, y, _, i)| Circle::new((x, y), 1, rgb(view_color(i)).filled())),
+            .map(|&(x, y, _, i)| Circle::new((x, y), 2, rgb(view_color(i)).filled())),
     )?;
     Ok(())
 }
@@ -574,7 +606,8 @@ mod tests {
         std::fs::create_dir_all(&dir).unwrap();
         let history: Vec<Vec<f64>> = (0..6).map(|g| vec![1.0 / (g + 1) as f64; 6]).collect();
         let names = mtpcr_core::ViewGraph::ring(3).unwrap().task_names();
-        convergence_png(&history, &names, "t", &dir.join("c.png")).unwrap();
+        let restarts = vec![history.clone(), history.clone()];
+        convergence_png(&restarts, 1, &names, "t", &dir.join("c.png")).unwrap();
         let methods = vec![
             ("a".to_string(), history.clone()),
             ("b".to_string(), history),

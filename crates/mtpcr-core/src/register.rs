@@ -65,6 +65,8 @@ impl PreparedProblem {
             completed,
             restarts_run,
             agreed,
+            histories,
+            kept,
         } = found;
 
         let evolved: Vec<Rigid> = (0..edges)
@@ -128,6 +130,9 @@ impl PreparedProblem {
             verdict,
             task_names: graph.task_names(),
             history: out.history,
+            restart_histories: histories,
+            kept_restart: kept,
+            sampled_points: self.clouds().iter().map(|c| c.points().len()).collect(),
             evaluations,
             generations_run,
             restarts_run,
@@ -313,6 +318,10 @@ struct SearchOutcome {
     restarts_run: usize,
     /// Two restarts ended on the same transforms (within [`AGREE_DEGREES`]).
     agreed: bool,
+    /// Every restart's history, in the order they ran.
+    histories: Vec<Vec<Vec<f64>>>,
+    /// The index of the kept restart.
+    kept: usize,
 }
 
 /// Runs up to `config.restarts` independent evolutions and keeps the one with the lowest sum
@@ -337,6 +346,8 @@ fn search(
     let mut completed = true;
     let mut agreed = false;
     let mut restarts_run = 0;
+    let mut histories = Vec::new();
+    let mut kept = 0;
     for r in 0..config.restarts {
         // Restart 0 uses the seed itself, so one restart is exactly the paper's run.
         let run_seed = if r == 0 {
@@ -372,10 +383,12 @@ fn search(
         };
         agreed |= finals.iter().any(agrees);
         finals.push(transforms);
+        histories.push(out.history.clone());
         if best
             .as_ref()
             .is_none_or(|b| out.original_total() < b.original_total())
         {
+            kept = r;
             best = Some(out);
         }
         if stopped {
@@ -393,6 +406,8 @@ fn search(
         completed,
         restarts_run,
         agreed,
+        histories,
+        kept,
     }
 }
 

@@ -58,6 +58,13 @@ pub struct Registration {
     /// Best cost of each task of the kept evolution after its initial population (row 0) and
     /// after every generation, in slot order.
     pub history: Vec<Vec<f64>>,
+    /// The history of every restart, in the order they ran (`history` is the kept one's).
+    pub restart_histories: Vec<Vec<Vec<f64>>>,
+    /// Which restart was kept (index into `restart_histories`): the one with the lowest sum
+    /// of final original-task costs.
+    pub kept_restart: usize,
+    /// Points of each cloud after downsampling (what the search scored).
+    pub sampled_points: Vec<usize>,
     /// Loss evaluations made (all restarts).
     pub evaluations: usize,
     /// Generations run (all restarts; less than configured when the observer stopped the run).
