@@ -16,7 +16,7 @@ for variant in "${@:-paper mfea gmfea default}"; do
       mfea) flags=(--paper --method mfea) ;;
       gmfea) flags=(--paper --method gmfea) ;;
       # The default setting before feature hypotheses and early stopping existed.
-      default) flags=(--order given --hypotheses 0 --stop-when-restarts-agree false --max-sample-points 0) ;;
+      default) flags=(--order given --hypotheses 0 --stop-when-restarts-agree false --max-sample-points 0 --population-size 100 --generations 30) ;;
       *) echo "unknown variant $v" >&2; exit 2 ;;
     esac
     echo "== $v"
