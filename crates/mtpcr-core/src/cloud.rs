@@ -159,10 +159,21 @@ impl PointCloud {
     /// Indices of `count` points chosen by farthest-point sampling, starting at index 0.
     /// Ties go to the lowest index, so the result is fully deterministic.
     pub fn farthest_point_indices(&self, count: usize) -> Vec<usize> {
+        self.farthest_point_indices_until(count, &|| false)
+            .unwrap_or_default()
+    }
+
+    /// [`PointCloud::farthest_point_indices`], checking `stop` every 256 picks; `None` when
+    /// it asked to stop.
+    pub fn farthest_point_indices_until(
+        &self,
+        count: usize,
+        stop: &(dyn Fn() -> bool + Sync),
+    ) -> Option<Vec<usize>> {
         let n = self.points.len();
         let count = count.min(n);
         if count == 0 {
-            return Vec::new();
+            return Some(Vec::new());
         }
         // Structure of arrays so the distance update vectorises.
         let xs: Vec<f64> = self.points.iter().map(|p| p[0]).collect();
@@ -171,7 +182,10 @@ impl PointCloud {
         let mut nearest = vec![f64::INFINITY; n];
         let mut chosen = Vec::with_capacity(count);
         let mut current = 0usize;
-        for _ in 0..count {
+        for pick in 0..count {
+            if pick % 256 == 255 && stop() {
+                return None;
+            }
             chosen.push(current);
             let (cx, cy, cz) = (xs[current], ys[current], zs[current]);
             // Three branch-free passes (update, max, first index of the max) vectorise;
@@ -185,7 +199,7 @@ impl PointCloud {
             let far = nearest.iter().copied().fold(f64::NEG_INFINITY, f64::max);
             current = nearest.iter().position(|&d| d == far).unwrap_or(0);
         }
-        chosen
+        Some(chosen)
     }
 
     /// `count` points by farthest-point sampling (see [`PointCloud::farthest_point_indices`]).

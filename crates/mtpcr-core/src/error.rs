@@ -72,6 +72,9 @@ pub enum Error {
         /// What is wrong with it.
         problem: String,
     },
+    /// The caller interrupted the registration (see `Interrupt`).
+    #[error("interrupted")]
+    Interrupted,
     /// Any other invalid argument (a transform that is not rigid, mismatched lengths, ...).
     #[error("{0}")]
     InvalidInput(String),

@@ -67,6 +67,7 @@ pub(crate) fn register_unordered(
     }
     let n = prepared.clouds().len();
     let pairs = screen(prepared, config.hypotheses, pool)?;
+    prepared.interrupt().check()?;
     let tolerance = loop_tolerance(prepared);
     let chosen = verify(&pairs, n, tolerance);
     // A verified pose must also pass the verdict's surface test.
@@ -92,6 +93,7 @@ pub(crate) fn register_unordered(
         round += 1;
         let (mut placed, mut used, poses) = place(&pairs, &chosen, &rejected, n, tolerance);
         let refined = refine_placed(prepared, config, pool, &pairs, &used, &placed, &poses);
+        prepared.interrupt().check()?;
         let checks: Vec<EdgeCheck> = used
             .iter()
             .map(|&p| measure(prepared, &pairs[p], &refined))
@@ -351,6 +353,7 @@ fn refine_placed(
         .iter()
         .map(|&v| Rigid::from_matrix(&poses[v].expect("placed")))
         .collect();
+    let interrupt = prepared.interrupt();
     let out = refine_poses(
         &clouds,
         &edges,
@@ -358,6 +361,7 @@ fn refine_placed(
         prepared.eps(),
         config.refine_iterations,
         pool,
+        &|| interrupt.is_set(),
     );
     for (k, &v) in index.iter().enumerate() {
         all[v] = Some(out[k].to_matrix());

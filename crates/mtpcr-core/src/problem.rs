@@ -7,6 +7,7 @@ use crate::config::{Config, Order};
 use crate::error::{Error, Result};
 use crate::features::{candidates, describe, FeatureConfig, Features};
 use crate::graph::ViewGraph;
+use crate::interrupt::Interrupt;
 use crate::loss::{CappedDistanceLoss, InlierLoss, Loss};
 use crate::refine::RefineCloud;
 use crate::se3::{translation, Rigid, Transform};
@@ -40,6 +41,8 @@ pub struct PreparedProblem {
     /// Keypoint features of each centred full-resolution cloud (only with hypotheses).
     features: Option<(FeatureConfig, Vec<Features>)>,
     feature_voxel_ratio: f64,
+    /// Checked between the steps of preparing and registering.
+    interrupt: Interrupt,
     seconds: f64,
 }
 
@@ -48,11 +51,20 @@ impl PreparedProblem {
     /// `given` order) a ring ([`ViewGraph::for_views`]), four or more in `auto` order a set
     /// with no known edges ([`ViewGraph::general`]).
     pub fn new(clouds: &[PointCloud], config: &Config) -> Result<PreparedProblem> {
+        PreparedProblem::new_with_interrupt(clouds, config, Interrupt::new())
+    }
+
+    /// [`PreparedProblem::new`] that stops once `interrupt` is set.
+    pub fn new_with_interrupt(
+        clouds: &[PointCloud],
+        config: &Config,
+        interrupt: Interrupt,
+    ) -> Result<PreparedProblem> {
         let graph = match (config.order, clouds.len()) {
             (Order::Auto, n) if n >= 4 => ViewGraph::general(n, Vec::new())?,
             (_, n) => ViewGraph::for_views(n)?,
         };
-        PreparedProblem::with_graph(clouds, graph, config)
+        PreparedProblem::with_interrupt(clouds, graph, config, interrupt)
     }
 
     /// Validates the clouds and the config, downsamples (random sampling uses `config.seed`, or
@@ -61,6 +73,18 @@ impl PreparedProblem {
         clouds: &[PointCloud],
         graph: ViewGraph,
         config: &Config,
+    ) -> Result<PreparedProblem> {
+        PreparedProblem::with_interrupt(clouds, graph, config, Interrupt::new())
+    }
+
+    /// [`PreparedProblem::with_graph`] that stops with [`Error::Interrupted`] once
+    /// `interrupt` is set (checked during preparation and by every later registration of
+    /// this problem).
+    pub fn with_interrupt(
+        clouds: &[PointCloud],
+        graph: ViewGraph,
+        config: &Config,
+        interrupt: Interrupt,
     ) -> Result<PreparedProblem> {
         let start = Instant::now();
         config.validate()?;
@@ -75,7 +99,8 @@ impl PreparedProblem {
             c.validate(&format!("cloud {}", i + 1), MIN_POINTS)?;
         }
         let pool = thread_pool(config.num_threads)?;
-        let sampled: Vec<PointCloud> = pool.install(|| {
+        let stop = || interrupt.is_set();
+        let sampled: Vec<Option<PointCloud>> = pool.install(|| {
             use rayon::prelude::*;
             clouds
                 .par_iter()
@@ -96,17 +121,25 @@ impl PreparedProblem {
                         {
                             let stride = c.len().div_ceil(PRE_SAMPLE * count);
                             let thin: Vec<usize> = (0..c.len()).step_by(stride).collect();
-                            c.select(&thin).farthest_point_sample(count)
+                            let thin = c.select(&thin);
+                            let picked = thin.farthest_point_indices_until(count, &stop)?;
+                            Some(thin.select(&picked))
                         }
-                        Sampling::Farthest => c.farthest_point_sample(count),
+                        Sampling::Farthest => {
+                            Some(c.select(&c.farthest_point_indices_until(count, &stop)?))
+                        }
                         Sampling::Random => {
                             let seed = config.seed.unwrap_or(0) ^ (0x5eed_0000 + i as u64);
-                            c.random_sample(count, &mut ChaCha8Rng::seed_from_u64(seed))
+                            Some(c.random_sample(count, &mut ChaCha8Rng::seed_from_u64(seed)))
                         }
                     }
                 })
                 .collect()
         });
+        let sampled: Vec<PointCloud> = sampled
+            .into_iter()
+            .collect::<Option<_>>()
+            .ok_or(Error::Interrupted)?;
         // Stray points (far from every surface) would stretch the extent, eps and the
         // search box; farthest-point sampling always keeps them, so drop them here.
         let sampled: Vec<PointCloud> = sampled.iter().map(|c| c.without_strays().0).collect();
@@ -152,6 +185,7 @@ impl PreparedProblem {
                 .map(|(c, m)| RefineCloud::new(c.translated([-m[0], -m[1], -m[2]]).into_points()))
                 .collect()
         });
+        interrupt.check()?;
         let features = if config.hypotheses > 0 {
             let full: Vec<Vec<[f64; 3]>> = clouds
                 .iter()
@@ -190,6 +224,7 @@ impl PreparedProblem {
             aiding_cap_ratio: config.aiding_cap_ratio,
             features,
             feature_voxel_ratio: config.feature_voxel_ratio,
+            interrupt,
             seconds: start.elapsed().as_secs_f64(),
         })
     }
@@ -212,6 +247,11 @@ impl PreparedProblem {
     /// Largest bounding-box side of the prepared clouds (the translation bound).
     pub fn shift(&self) -> f64 {
         self.shift
+    }
+
+    /// The flag this problem's registrations stop on.
+    pub(crate) fn interrupt(&self) -> &Interrupt {
+        &self.interrupt
     }
 
     /// Seconds spent preparing.

@@ -170,6 +170,7 @@ pub(crate) fn refine_poses(
     eps: f64,
     iterations: usize,
     pool: &rayon::ThreadPool,
+    stop: &dyn Fn() -> bool,
 ) -> Vec<Rigid> {
     let directions: Vec<(usize, usize)> = edges
         .iter()
@@ -178,6 +179,9 @@ pub(crate) fn refine_poses(
     // Six unknowns (rotation, translation) per cloud but the first.
     let unknowns = 6 * (poses.len() - 1);
     for it in 0..iterations {
+        if stop() {
+            break;
+        }
         let frac = if iterations > 1 {
             it as f64 / (iterations - 1) as f64
         } else {
@@ -348,7 +352,15 @@ mod tests {
         let ring = crate::graph::ViewGraph::ring(3).unwrap();
         let (pool, start) = (two_threads(), misaligned_start());
         let clouds: Vec<&RefineCloud> = clouds.iter().collect();
-        let est = refine_poses(&clouds, ring.edges(), start.to_vec(), 0.04, 40, &pool);
+        let est = refine_poses(
+            &clouds,
+            ring.edges(),
+            start.to_vec(),
+            0.04,
+            40,
+            &pool,
+            &|| false,
+        );
         let ident = Rigid::from_individual(&[0.0; 6]).to_matrix();
         let worst = est
             .iter()
@@ -363,7 +375,15 @@ mod tests {
         let ring = crate::graph::ViewGraph::ring(3).unwrap();
         let (pool, start) = (two_threads(), misaligned_start());
         let clouds: Vec<&RefineCloud> = clouds.iter().collect();
-        let est = refine_poses(&clouds, ring.edges(), start.to_vec(), 0.02, 40, &pool);
+        let est = refine_poses(
+            &clouds,
+            ring.edges(),
+            start.to_vec(),
+            0.02,
+            40,
+            &pool,
+            &|| false,
+        );
         let ident = Rigid::from_individual(&[0.0; 6]).to_matrix();
         for pose in &est {
             assert!(rotation_error_deg(&pose.to_matrix(), &ident) < 0.05);
@@ -374,7 +394,15 @@ mod tests {
             .build()
             .unwrap();
         assert_eq!(
-            refine_poses(&clouds, ring.edges(), start.to_vec(), 0.02, 40, &one),
+            refine_poses(
+                &clouds,
+                ring.edges(),
+                start.to_vec(),
+                0.02,
+                40,
+                &one,
+                &|| false
+            ),
             est,
             "thread count changes nothing"
         );

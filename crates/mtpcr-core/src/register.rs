@@ -6,6 +6,7 @@ use crate::cloud::PointCloud;
 use crate::config::{Config, Method};
 use crate::ea::{self, Observer, Outcome, Progress, SearchBox, Tasks};
 use crate::error::{Error, Result};
+use crate::interrupt::Interrupt;
 use crate::loss::Loss;
 use crate::multiview::{best_closing_triple, loop_tolerance, register_unordered};
 use crate::problem::{thread_pool, PreparedProblem};
@@ -56,8 +57,10 @@ impl PreparedProblem {
             search_box: SearchBox::for_shift(self.shift()),
             shift: self.shift(),
             seeds,
+            interrupt: self.interrupt(),
         };
         let found = search(&tasks, config, seed, self.shift(), &pool, observer);
+        self.interrupt().check()?;
         let SearchOutcome {
             best: out,
             evaluations,
@@ -241,14 +244,18 @@ impl PreparedProblem {
     ) -> Result<Vec<Rigid>> {
         let start = self.consistent_start(pairs);
         let full: Vec<&_> = self.refine_clouds().iter().collect();
-        Ok(refine_poses(
+        let interrupt = self.interrupt();
+        let poses = refine_poses(
             &full,
             self.graph().edges(),
             start,
             self.eps(),
             iterations,
             pool,
-        ))
+            &|| interrupt.is_set(),
+        );
+        interrupt.check()?;
+        Ok(poses)
     }
 
     /// Poses of every view in view 0's centred frame from the spanning tree of the graph
@@ -357,7 +364,11 @@ fn search(
         };
         let offset = generations_run;
         let done_before = evaluations;
+        let interrupt = tasks.interrupt;
         let mut forward = |p: &Progress| {
+            if interrupt.is_set() {
+                return ControlFlow::Break(());
+            }
             observer(&Progress {
                 generation: offset + p.generation,
                 generations: total_generations,
@@ -430,11 +441,22 @@ pub fn register(
     config: &Config,
     observer: Option<Observer<'_>>,
 ) -> Result<Registration> {
+    register_interruptible(clouds, config, observer, Interrupt::new())
+}
+
+/// [`register`] that stops with [`Error::Interrupted`] soon after `interrupt` is set (from
+/// another thread): during sampling, between generations, refinement iterations and pairs.
+pub fn register_interruptible(
+    clouds: &[PointCloud],
+    config: &Config,
+    observer: Option<Observer<'_>>,
+    interrupt: Interrupt,
+) -> Result<Registration> {
     let start = Instant::now();
     let mut config = config.clone();
     config.validate()?;
     config.seed = Some(config.seed.unwrap_or_else(rand::random));
-    let prepared = PreparedProblem::new(clouds, &config)?;
+    let prepared = PreparedProblem::new_with_interrupt(clouds, &config, interrupt)?;
     let mut result = prepared.register(&config, observer)?;
     result.seconds = start.elapsed().as_secs_f64();
     Ok(result)

@@ -97,6 +97,8 @@ pub(crate) struct Tasks<'a> {
     /// Individuals placed in each edge's initial populations (both of them) in place of
     /// the first random ones: pose hypotheses found elsewhere (empty: none).
     pub seeds: Vec<Vec<Individual>>,
+    /// Stops the search between generations.
+    pub interrupt: &'a crate::interrupt::Interrupt,
 }
 
 impl Tasks<'_> {

@@ -286,6 +286,7 @@ mod tests {
                 search_box: SearchBox::for_shift(0.15),
                 shift: 0.15,
                 seeds: Vec::new(),
+                interrupt: &crate::interrupt::Interrupt::new(),
             };
             let config = Config {
                 population_size: 30,
