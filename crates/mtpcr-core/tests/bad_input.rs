@@ -64,6 +64,74 @@ fn all_points_identical() {
     assert!(matches!(e, Error::DegenerateCloud { .. }), "{e}");
 }
 
+/// A point at 1e308 or a whole cloud scaled by 1e300 used to give NaN transforms; now an error
+/// names the cloud and the point.
+#[test]
+fn finite_but_huge_coordinates() {
+    let mut c = clouds();
+    let mut pts = c[1].points().to_vec();
+    pts[42][0] = 1e308;
+    c[1] = PointCloud::new(pts);
+    let e = register(&c, &quick(), None).unwrap_err();
+    assert!(
+        matches!(e, Error::CoordinateTooLarge { index: 42, .. }),
+        "{e}"
+    );
+    assert!(
+        e.to_string().contains("cloud 2") && e.to_string().contains("point 42"),
+        "{e}"
+    );
+
+    let scaled = |s: f64| -> Vec<PointCloud> {
+        clouds()
+            .iter()
+            .map(|c| PointCloud::new(c.points().iter().map(|p| p.map(|v| v * s)).collect()))
+            .collect()
+    };
+    let e = register(&scaled(1e300), &quick(), None).unwrap_err();
+    assert!(
+        matches!(e, Error::CoordinateTooLarge { index: 0, .. }),
+        "{e}"
+    );
+    // Just under the limit the run works and its transforms are finite.
+    let largest = clouds()
+        .iter()
+        .flat_map(|c| c.points().iter().flatten().map(|v| v.abs()))
+        .fold(0.0, f64::max);
+    let r = register(
+        &scaled(0.99 * mtpcr_core::cloud::MAX_COORDINATE / largest),
+        &quick(),
+        None,
+    )
+    .unwrap();
+    for e in &r.edges {
+        assert!(
+            e.t_target_source.iter().all(|v| v.is_finite()),
+            "{}",
+            e.t_target_source
+        );
+    }
+}
+
+#[test]
+fn collinear_cloud() {
+    let mut c = clouds();
+    c[2] = PointCloud::new(
+        (0..300)
+            .map(|i| {
+                let t = i as f64 * 0.01;
+                [0.2 + t, -0.1 + 2.0 * t, 0.5 - 0.3 * t]
+            })
+            .collect(),
+    );
+    let e = register(&c, &quick(), None).unwrap_err();
+    assert!(matches!(e, Error::CollinearCloud { .. }), "{e}");
+    assert!(
+        e.to_string().contains("cloud 3") && e.to_string().contains("line"),
+        "{e}"
+    );
+}
+
 #[test]
 fn config_values_out_of_range_name_the_field() {
     let base = quick();

@@ -6,6 +6,7 @@
 //! into `DIR` (as `scripts/fuzz.sh` does for the fuzzers' corpora).
 
 use super::*;
+use std::path::PathBuf;
 
 /// A fresh temporary file name: tests call [`seeds`] concurrently.
 fn tmp(name: &str) -> PathBuf {
