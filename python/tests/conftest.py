@@ -11,7 +11,6 @@ rigid motion. About 60-80 % of a view's points lie on its neighbour in the loop.
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from pathlib import Path
 

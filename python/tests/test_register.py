@@ -54,7 +54,9 @@ def test_result_is_read_only_and_self_describing(small_views):
     # Without refinement the loop is not closed: the poses follow two of the three edges
     # (all but the one of highest cost).
     agree = [
-        np.allclose(np.linalg.inv(r.poses[e["target"]]) @ r.poses[e["source"]], e["t_target_source"])
+        np.allclose(
+            np.linalg.inv(r.poses[e["target"]]) @ r.poses[e["source"]], e["t_target_source"]
+        )
         for e in r.edges
     ]
     assert sum(agree) >= 2, agree

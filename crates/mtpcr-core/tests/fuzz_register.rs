@@ -26,3 +26,32 @@ fn short_inputs() {
         fuzz_input::check(&[a.wrapping_mul(37), a, 255 - a]);
     }
 }
+
+/// Replays the fuzzer's input files named in `MTPCR_FUZZ_REPLAY` (separated by `:`), printing
+/// each one's config, cloud sizes, outcome and time, in a plain release build:
+/// `MTPCR_FUZZ_REPLAY=fuzz/artifacts/register/crash-... cargo test -p mtpcr-core --release
+/// --test fuzz_register -- --ignored --nocapture`.
+#[test]
+#[ignore = "set MTPCR_FUZZ_REPLAY to the input files"]
+fn replay() {
+    let Some(files) = std::env::var_os("MTPCR_FUZZ_REPLAY") else {
+        return;
+    };
+    for file in std::env::split_paths(&files) {
+        let data = std::fs::read(&file).unwrap();
+        let (config, clouds) = fuzz_input::decode(&data);
+        let sizes: Vec<usize> = clouds.iter().map(|c| c.len()).collect();
+        let start = std::time::Instant::now();
+        let outcome = mtpcr_core::register(&clouds, &config, None);
+        println!(
+            "{}: {data:?}\n  {config:?}\n  points {sizes:?}\n  {:.2} s: {}",
+            file.display(),
+            start.elapsed().as_secs_f64(),
+            match &outcome {
+                Ok(r) => format!("ok, {} edges, unplaced {:?}", r.edges.len(), r.unplaced),
+                Err(e) => format!("error: {e}"),
+            }
+        );
+        fuzz_input::check(&data);
+    }
+}
