@@ -308,7 +308,7 @@ def register(
     continues; an exception in it, or Ctrl-C, stops the run and propagates.
 
     Each cloud holds real numbers (float or int; booleans, complex numbers and strings raise
-    ``ValueError``), at least ``MIN_POINTS`` finite points of magnitude at most 1e150, not
+    ``ValueError``), at least ``MIN_POINTS`` finite points of magnitude at most 1e30, not
     all on one line. A planar cloud is registered with a ``UserWarning``: its rotation about
     the plane normal is weakly determined.
     """

@@ -34,7 +34,7 @@ pub enum Error {
         value: String,
     },
     /// A coordinate is so large (beyond [`crate::cloud::MAX_COORDINATE`] in absolute value) that
-    /// squared distances would overflow.
+    /// distances or squared distances would overflow.
     #[error(
         "{cloud}: point {index} has a coordinate too large to register ({value}; the limit is \
          {limit} in absolute value): rescale or re-centre the cloud"

@@ -6,11 +6,19 @@
 mod fuzz_input;
 
 /// Inputs the fuzzer crashed on (minimised), with what went wrong.
-const CRASHES: &[(&str, &[u8])] = &[(
-    "segfault in nalgebra's LU solve of a 0 x 0 system: refine_poses with one cloud placed \
-     of four (order auto, refine_iterations 1)",
-    &[91, 10, 99],
-)];
+const CRASHES: &[(&str, &[u8])] = &[
+    (
+        "segfault in nalgebra's LU solve of a 0 x 0 system: refine_poses with one cloud placed \
+         of four (order auto, refine_iterations 1)",
+        &[91, 10, 99],
+    ),
+    (
+        "MFEA panicked (mfea.rs best_of: no member with a cost) on NaN costs: a cloud at 1e50 \
+         overflowed the f32 distance field; coordinates beyond 1e30 are now refused",
+        &[4, 43, 39],
+    ),
+    ("the same MFEA panic, on another input", &[67, 237, 249]),
+];
 
 #[test]
 fn inputs_the_fuzzer_crashed_on() {
@@ -41,15 +49,19 @@ fn replay() {
         let data = std::fs::read(&file).unwrap();
         let (config, clouds) = fuzz_input::decode(&data);
         let sizes: Vec<usize> = clouds.iter().map(|c| c.len()).collect();
-        let start = std::time::Instant::now();
-        let outcome = mtpcr_core::register(&clouds, &config, None);
         println!(
-            "{}: {data:?}\n  {config:?}\n  points {sizes:?}\n  {:.2} s: {}",
-            file.display(),
+            "{}: {data:?}\n  {config:?}\n  points {sizes:?}",
+            file.display()
+        );
+        let start = std::time::Instant::now();
+        let outcome = std::panic::catch_unwind(|| mtpcr_core::register(&clouds, &config, None));
+        println!(
+            "  {:.2} s: {}",
             start.elapsed().as_secs_f64(),
             match &outcome {
-                Ok(r) => format!("ok, {} edges, unplaced {:?}", r.edges.len(), r.unplaced),
-                Err(e) => format!("error: {e}"),
+                Ok(Ok(r)) => format!("ok, {} edges, unplaced {:?}", r.edges.len(), r.unplaced),
+                Ok(Err(e)) => format!("error: {e}"),
+                Err(_) => "panicked".to_string(),
             }
         );
         fuzz_input::check(&data);

@@ -47,7 +47,7 @@ fn call_observer(
 /// Each cloud is anything numpy can view as an ``(N, 3)`` array of real numbers (float or
 /// int, C or Fortran order, nested lists, an object array of numbers; booleans, complex
 /// numbers and strings are refused); it needs at least ``MIN_POINTS`` finite points of
-/// magnitude at most 1e150, not all identical and not all on one line. A planar cloud is
+/// magnitude at most 1e30, not all identical and not all on one line. A planar cloud is
 /// registered with a ``UserWarning`` (its rotation about the plane normal is weakly
 /// determined). ``seed`` fixes the run (the same seed, settings and clouds
 /// give the same result, whatever ``num_threads``); without one the config's seed is used, or

@@ -196,7 +196,8 @@ pub fn decode(data: &[u8]) -> (Config, Vec<PointCloud>) {
 }
 
 /// Registers the input's clouds; panics if the engine panics or an `Ok` result has a
-/// non-finite transform or pose. An `Err` is fine (most degenerate inputs give one).
+/// non-finite transform or pose, or a NaN best cost. An `Err` is fine (most degenerate inputs
+/// give one).
 pub fn check(data: &[u8]) {
     let (config, clouds) = decode(data);
     if std::env::var_os("MTPCR_FUZZ_PRINT").is_some() {
@@ -206,6 +207,11 @@ pub fn check(data: &[u8]) {
         }
     }
     if let Ok(r) = register(&clouds, &config, None) {
+        assert!(
+            r.history.iter().flatten().all(|v| !v.is_nan()),
+            "a best cost is NaN: {:?}",
+            r.history
+        );
         for (k, e) in r.edges.iter().enumerate() {
             assert!(
                 e.t_target_source.iter().all(|v| v.is_finite()),
