@@ -328,6 +328,11 @@ def register(
     (``generation`` counts 1, 2, ... across restarts; ``best_costs`` maps the task names to
     the best cost so far); returning False stops the run (``completed=False``), None or True
     continues; an exception in it, or Ctrl-C, stops the run and propagates.
+
+    Each cloud holds real numbers (float or int; booleans, complex numbers and strings raise
+    ``ValueError``), at least ``MIN_POINTS`` finite points of magnitude at most 1e30, not
+    all on one line. A planar cloud is registered with a ``UserWarning``: its rotation about
+    the plane normal is weakly determined.
     """
 
 def read_ply(path: _Path) -> NDArray[np.float64]:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -46,6 +47,9 @@ BAD_CLOUDS = [
     ("all identical", lambda c: np.ones((50, 3)), "identical"),
     ("ragged list", lambda c: [[0.0, 1.0, 2.0], [1.0, 2.0]], "must be an (N, 3) array"),
     ("strings", lambda c: [["a", "b", "c"]] * 20, "must be an (N, 3) array"),
+    ("huge coordinate", lambda c: nan_at(c, 9, 0, 1e308), "point 9 has a coordinate too large"),
+    ("scaled by 1e300", lambda c: np.asarray(c) * 1e300, "too large to register"),
+    ("collinear", lambda c: np.outer(np.linspace(0, 1, 200), [1.0, 2.0, -0.5]), "on one line"),
     ("None", lambda c: None, "cloud"),
     ("dict", lambda c: {"x": 1}, "cloud"),
 ]
@@ -61,6 +65,71 @@ def test_bad_cloud_is_a_value_error_naming_the_argument(good, index, description
     message = str(info.value)
     assert name in message, f"{description}: {message!r} does not name {name}"
     assert fragment in message, f"{description}: {message!r} lacks {fragment!r}"
+
+
+# Arrays numpy would cast to float64 without a word: refused, naming the dtype.
+BAD_DTYPES = [
+    ("bool", lambda c: np.asarray(c) > 0, "dtype bool"),
+    ("bool list", lambda c: (np.asarray(c) > 0).tolist(), "dtype bool"),
+    ("complex", lambda c: np.asarray(c) + 0j, "dtype complex128"),
+    ("complex64", lambda c: (np.asarray(c) + 1j).astype(np.complex64), "dtype complex64"),
+    ("numeric str", lambda c: np.asarray(c).astype(str), "dtype <U"),
+    ("numeric str list", lambda c: np.asarray(c).astype(str).tolist(), "dtype <U"),
+    ("bytes", lambda c: np.asarray(c).astype(bytes), "dtype |S"),
+    ("object of str", lambda c: np.asarray(c).astype(str).astype(object), "dtype object"),
+    ("object of mixed", lambda c: np.array([[1.0, "2", 3.0]] * 20, dtype=object), "dtype object"),
+    ("datetime", lambda c: np.zeros((20, 3), dtype="datetime64[s]"), "dtype datetime64[s]"),
+]
+
+
+@pytest.mark.parametrize("index", [0, 2])
+@pytest.mark.parametrize("description, make, fragment", BAD_DTYPES, ids=[b[0] for b in BAD_DTYPES])
+def test_arrays_that_are_not_real_numbers_are_refused(good, index, description, make, fragment):
+    name = f"cloud{index + 1}"
+    clouds = with_cloud(good, index, make(good[index]))
+    with pytest.raises(ValueError) as info:
+        mtpcr.register(*clouds, seed=1, **QUICK)
+    message = str(info.value)
+    assert f"{name} must be an (N, 3) array of real numbers" in message, message
+    assert fragment in message, f"{description}: {message!r} lacks {fragment!r}"
+
+
+def test_numbers_of_any_real_dtype_or_as_objects_are_accepted(good, recwarn):
+    expected = mtpcr.register(*good, seed=3, **QUICK).transforms
+    for convert in (
+        lambda c: c.astype(object),
+        np.asfortranarray,
+        lambda c: [[float(v) for v in row] for row in c],
+    ):
+        clouds = [convert(np.asarray(c)) for c in good]
+        got = mtpcr.register(*clouds, seed=3, **QUICK).transforms
+        np.testing.assert_array_equal(got, expected)
+    assert not recwarn.list, [str(w.message) for w in recwarn.list]
+    # Integer coordinates (millimetres, say) are numbers too.
+    ints = [np.round(np.asarray(c) * 1e4).astype(np.int32) for c in good]
+    assert mtpcr.register(*ints, seed=3, **QUICK).transforms.shape == (3, 4, 4)
+    with pytest.raises(
+        ValueError, match=r"points must be an \(N, 3\) array of real numbers.*got dtype bool"
+    ):
+        mtpcr.write_ply("unused.ply", np.ones((20, 3), dtype=bool))
+
+
+def test_a_planar_cloud_is_registered_with_a_user_warning(good):
+    flat = np.array(good[1], dtype=np.float64)
+    flat[:, 2] = 0.25
+    with pytest.warns(UserWarning) as caught:
+        result = mtpcr.register(good[0], flat, good[2], seed=1, **QUICK)
+    messages = [str(w.message) for w in caught]
+    assert messages == [
+        "cloud2 is planar: its rotation about the plane normal is weakly determined"
+    ], messages
+    assert caught[0].filename == __file__, "the warning points at the caller"
+    assert np.isfinite(result.transforms).all()
+    # Warnings turned into errors stop the run.
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(UserWarning, match="cloud2 is planar"):
+            mtpcr.register(good[0], flat, good[2], seed=1, **QUICK)
 
 
 BAD_SETTINGS = [

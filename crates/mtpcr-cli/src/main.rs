@@ -2,10 +2,12 @@
 //! all registration logic lives in `mtpcr-core`.
 //!
 //! Exit codes: 0 success, 1 failure (a message `error: ...` on stderr), 2 usage error, 3
-//! registered and written but not confident (the verdict's reasons are printed).
+//! registered and written but not confident (the verdict's reasons are printed), 130
+//! `register` interrupted by Ctrl-C (see [`interrupt`]).
 
 mod error;
 mod experiment;
+mod interrupt;
 mod output;
 mod plots;
 mod progress;
@@ -173,8 +175,17 @@ fn draw_seed() -> u64 {
         & 0xffff_ffff
 }
 
+/// The warning for a planar cloud (see [`PointCloud::is_planar`]), `number` counted from 1.
+fn planar_warning(number: usize, label: &str) -> String {
+    format!(
+        "warning: cloud {number} is planar: its rotation about the plane normal is weakly \
+         determined ({label})"
+    )
+}
+
 /// Reads every scan of every file (an E57 file may hold several), validated; returns the
 /// clouds and a label per cloud (the file, and the scan's name when a file holds several).
+/// A planar cloud is accepted with a warning on stderr (even with `--quiet`).
 fn read_clouds(paths: &[PathBuf], quiet: bool) -> CliResult<(Vec<PointCloud>, Vec<String>)> {
     let mut clouds = Vec::with_capacity(paths.len());
     let mut labels = Vec::with_capacity(paths.len());
@@ -188,6 +199,9 @@ fn read_clouds(paths: &[PathBuf], quiet: bool) -> CliResult<(Vec<PointCloud>, Ve
                 p.display().to_string()
             };
             scan.cloud.validate(&label, MIN_POINTS)?;
+            if scan.cloud.is_planar() {
+                eprintln!("{}", planar_warning(clouds.len() + 1, &label));
+            }
             if !quiet {
                 eprintln!("read {label}: {} points", scan.cloud.len());
             }
@@ -212,6 +226,7 @@ fn register_files(
 ) -> CliResult<bool> {
     let mut config = settings::resolve(run, seed)?;
     config.seed = Some(config.seed.unwrap_or_else(draw_seed));
+    interrupt::install()?;
     // The folder is checked before the (possibly long) reading.
     let dir = output::prepare_output(output, inputs, force)?;
     let (clouds, labels) = match read_clouds(inputs, run.quiet) {
@@ -241,6 +256,7 @@ fn register_files(
         field_help: &help,
     };
     let written = output::write_results(&dir.path, &record)?;
+    interrupt::release();
 
     let edges = result.edges.len();
     for (k, e) in result.edges.iter().enumerate() {

@@ -1,6 +1,7 @@
 //! The results folder of `mtpcr register`: choosing and guarding it, and writing its files.
 
 use crate::error::{CliResult, Failure};
+use crate::interrupt;
 use crate::plots;
 use mtpcr_core::io::{matrix_rows, matrix_text, write_ply};
 use mtpcr_core::{Config, PointCloud, Registration};
@@ -21,21 +22,22 @@ pub const OUTPUT_FILES: [&str; 7] = [
 pub const CONVENTION: &str =
     "T_ij maps points of cloud i into the frame of cloud j (x_j = T_ij x_i); row-major 4x4";
 
-/// A results folder ready to be written.
+/// A results folder ready to be written. From its creation on, Ctrl-C cleans it up (see
+/// [`crate::interrupt`]).
 #[derive(Debug)]
 pub struct OutputDir {
     /// The folder.
     pub path: PathBuf,
-    /// This run created it (so it is removed again if the run fails before writing).
-    created: bool,
+    /// The folders this run created: the results folder first, then its new parents (so they
+    /// are removed again if the run fails or is interrupted before writing).
+    created: Vec<PathBuf>,
 }
 
 impl OutputDir {
-    /// Removes the folder if this run created it and nothing was written into it.
+    /// Removes the folder (and the parents this run created) if this run created it and
+    /// nothing was written into it.
     pub fn discard_if_unused(&self) {
-        if self.created {
-            let _ = std::fs::remove_dir(&self.path);
-        }
+        interrupt::discard(&self.path, &self.created);
     }
 }
 
@@ -110,19 +112,42 @@ pub fn prepare_output(dir: Option<&Path>, inputs: &[PathBuf], force: bool) -> Cl
             candidate
         }
     };
-    let created = !path.exists();
-    std::fs::create_dir_all(&path).map_err(|e| {
-        Failure(format!(
-            "{}: cannot create the output folder: {e}",
-            path.display()
-        ))
-    })?;
+    // The folders this run creates, the results folder first; guarded before they exist, so
+    // Ctrl-C at any moment from here on leaves no empty folder behind.
+    let created: Vec<PathBuf> = path
+        .ancestors()
+        .take_while(|a| !a.as_os_str().is_empty() && !a.exists())
+        .map(Path::to_path_buf)
+        .collect();
+    interrupt::guard(&path, created.clone());
     let out = OutputDir { path, created };
+    if let Err(e) = std::fs::create_dir_all(&out.path) {
+        out.discard_if_unused();
+        return Err(Failure(format!(
+            "{}: cannot create the output folder: {e}",
+            out.path.display()
+        )));
+    }
     if let Err(e) = check_output(&out.path, inputs) {
         out.discard_if_unused();
         return Err(e);
     }
     Ok(out)
+}
+
+/// What makes two names the same file: device and inode on unix (so a hard link or a
+/// symbolic link matches its target), the canonical path elsewhere.
+#[cfg(unix)]
+fn file_identity(path: &Path) -> Option<(u64, u64)> {
+    use std::os::unix::fs::MetadataExt;
+    let meta = std::fs::metadata(path).ok()?;
+    Some((meta.dev(), meta.ino()))
+}
+
+/// What makes two names the same file: the canonical path (hard links are not detected).
+#[cfg(not(unix))]
+fn file_identity(path: &Path) -> Option<PathBuf> {
+    std::fs::canonicalize(path).ok()
 }
 
 fn check_output(dir: &Path, inputs: &[PathBuf]) -> CliResult<()> {
@@ -146,8 +171,28 @@ fn check_output(dir: &Path, inputs: &[PathBuf]) -> CliResult<()> {
             )));
         }
     }
+    // An output name already in the folder may be another name of an input: a hard link, or
+    // a symbolic link to it. (Files are replaced by renaming, which would leave the input
+    // intact, but the user surely did not mean to write results over an input.)
+    for name in OUTPUT_FILES {
+        let existing = dir.join(name);
+        let Some(id) = file_identity(&existing) else {
+            continue;
+        };
+        if let Some(input) = inputs
+            .iter()
+            .find(|i| file_identity(i).as_ref() == Some(&id))
+        {
+            return Err(Failure(format!(
+                "{}: this output file is the input {} under another name (a hard or symbolic \
+                 link); choose another --output folder or remove the link",
+                existing.display(),
+                input.display()
+            )));
+        }
+    }
     // Fail now, not after a long run, if the folder cannot be written.
-    let probe = dir.join(".mtpcr-write-check");
+    let probe = interrupt::temporary_name(&dir.join("write-check"));
     std::fs::write(&probe, b"").map_err(|e| {
         Failure(format!(
             "{}: cannot write into the output folder: {e}",
@@ -174,8 +219,28 @@ pub struct RunRecord<'a> {
     pub field_help: &'a std::collections::BTreeMap<String, String>,
 }
 
+/// Writes `path` completely or not at all: `write` fills a temporary file in the same folder
+/// ([`interrupt::temporary_name`]), which is then renamed to `path` (replacing a file of that
+/// name, or a link, never what a link points to). Ctrl-C waits for the rename; on a failure the
+/// temporary file is removed and `path` is left as it was. Errors name `path`.
+pub fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> CliResult<()>) -> CliResult<()> {
+    let _lock = interrupt::writing();
+    let tmp = interrupt::temporary_name(path);
+    let outcome = write(&tmp).and_then(|()| {
+        std::fs::rename(&tmp, path).map_err(|e| Failure(format!("{}: {e}", path.display())))
+    });
+    if outcome.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    outcome.map_err(|Failure(message)| {
+        Failure(message.replace(&tmp.display().to_string(), &path.display().to_string()))
+    })
+}
+
 fn write_file(path: &Path, contents: &[u8]) -> CliResult<()> {
-    std::fs::write(path, contents).map_err(|e| Failure(format!("{}: {e}", path.display())))
+    write_atomically(path, |tmp| {
+        std::fs::write(tmp, contents).map_err(|e| Failure(format!("{}: {e}", tmp.display())))
+    })
 }
 
 /// The name of each edge (`T12`: cloud 1 into cloud 2), in edge order.
@@ -298,7 +363,9 @@ pub fn write_results(dir: &Path, rec: &RunRecord<'_>) -> CliResult<Vec<String>> 
         points.extend_from_slice(c.points());
         colors.extend(std::iter::repeat_n(plots::view_color(i), c.len()));
     }
-    write_ply(path("merged.ply"), &points, Some(&colors))?;
+    write_atomically(&path("merged.ply"), |tmp| {
+        Ok(write_ply(tmp, &points, Some(&colors))?)
+    })?;
 
     let run = rec.result.restart_histories.len();
     let title = if run > 1 {
@@ -312,13 +379,15 @@ pub fn write_results(dir: &Path, rec: &RunRecord<'_>) -> CliResult<Vec<String>> 
     // Scans in no known order are placed without an evolution: no convergence to draw.
     let with_history = !rec.result.history.is_empty();
     if with_history {
-        plots::convergence_png(
-            &rec.result.restart_histories,
-            rec.result.kept_restart,
-            &rec.result.task_names,
-            &title,
-            &path("convergence.png"),
-        )?;
+        write_atomically(&path("convergence.png"), |tmp| {
+            plots::convergence_png(
+                &rec.result.restart_histories,
+                rec.result.kept_restart,
+                &rec.result.task_names,
+                &title,
+                tmp,
+            )
+        })?;
     }
 
     let labels: Vec<String> = rec
@@ -335,7 +404,9 @@ pub fn write_results(dir: &Path, rec: &RunRecord<'_>) -> CliResult<Vec<String>> 
         .collect();
     let before: Vec<&[[f64; 3]]> = rec.clouds.iter().map(PointCloud::points).collect();
     let after: Vec<&[[f64; 3]]> = moved.iter().map(PointCloud::points).collect();
-    plots::views_png(&before, &after, &labels, &path("views.png"))?;
+    write_atomically(&path("views.png"), |tmp| {
+        plots::views_png(&before, &after, &labels, tmp)
+    })?;
     let html = crate::viewer::viewer_html(&before, &after, &labels, "", "mtpcr: registered scans");
     write_file(&path("view.html"), html.as_bytes())?;
     Ok(OUTPUT_FILES
@@ -348,6 +419,38 @@ pub fn write_results(dir: &Path, rec: &RunRecord<'_>) -> CliResult<Vec<String>> 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn atomic_writes_leave_the_old_file_or_the_new_one() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("result.json");
+        std::fs::write(&path, "old").unwrap();
+        // A writer that fails halfway: the old file stays, no temporary file remains, the
+        // error names the file asked for.
+        let e = write_atomically(&path, |tmp| {
+            std::fs::write(tmp, "half").unwrap();
+            Err(Failure(format!("{}: disk full", tmp.display())))
+        })
+        .unwrap_err();
+        assert_eq!(e.0, format!("{}: disk full", path.display()));
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "old");
+        let names = |d: &Path| -> Vec<String> {
+            std::fs::read_dir(d)
+                .unwrap()
+                .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+                .collect()
+        };
+        assert_eq!(names(dir.path()), ["result.json"]);
+        // While the writer runs, the file still holds the old content.
+        write_atomically(&path, |tmp| {
+            std::fs::write(tmp, "new").unwrap();
+            assert_eq!(std::fs::read_to_string(&path).unwrap(), "old");
+            Ok(())
+        })
+        .unwrap();
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "new");
+        assert_eq!(names(dir.path()), ["result.json"]);
+    }
 
     #[test]
     fn timestamps_look_like_dates() {

@@ -307,6 +307,28 @@ fn register_writes_every_output_file() {
     }
     let merged = read_ply(out.join("merged.ply")).unwrap();
     assert_eq!(merged.len(), 9000);
+    // Written under temporary names and renamed: only the results remain.
+    let mut names = file_names(&out);
+    names.sort();
+    let mut expected = [
+        "config.toml",
+        "convergence.png",
+        "merged.ply",
+        "result.json",
+        "transforms.txt",
+        "view.html",
+        "views.png",
+    ];
+    expected.sort();
+    assert_eq!(names, expected);
+}
+
+/// The names in a folder.
+fn file_names(dir: &Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect()
 }
 
 #[test]
@@ -381,6 +403,219 @@ fn register_never_overwrites_an_input() {
         &["merged.ply", "overwritten"],
     );
     assert_eq!(std::fs::read(&input).unwrap(), before);
+}
+
+/// `out/NAME` made another name of `input` by `link`, then `register --force` into `out`: an
+/// error naming both, and the input untouched.
+fn refuses_an_output_name_linked_to_an_input(
+    name: &str,
+    link: fn(&Path, &Path) -> std::io::Result<()>,
+) {
+    let dir = tempfile::tempdir().unwrap();
+    let views = write_views(dir.path());
+    let out = dir.path().join("out");
+    std::fs::create_dir(&out).unwrap();
+    link(&views[1], &out.join(name)).unwrap();
+    let before = std::fs::read(&views[1]).unwrap();
+    fails_with(
+        mtpcr()
+            .arg("register")
+            .args(args_of(&views))
+            .arg("--output")
+            .arg(&out)
+            .arg("--force")
+            .args(FAST),
+        1,
+        &[name, "view2.ply", "link", "another --output"],
+    );
+    assert_eq!(std::fs::read(&views[1]).unwrap(), before);
+    assert_eq!(file_names(&out), [name], "nothing written");
+}
+
+#[test]
+fn register_refuses_an_output_file_hard_linked_to_an_input() {
+    refuses_an_output_name_linked_to_an_input("merged.ply", |a, b| std::fs::hard_link(a, b));
+}
+
+#[cfg(unix)]
+#[test]
+fn register_refuses_an_output_file_symlinked_to_an_input() {
+    refuses_an_output_name_linked_to_an_input("result.json", |a, b| {
+        std::os::unix::fs::symlink(a, b)
+    });
+}
+
+#[test]
+fn a_planar_cloud_is_registered_with_a_warning() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut views = write_views(dir.path()).to_vec();
+    // Cloud 2 flattened onto z = 0.
+    let flat: Vec<[f64; 3]> = read_ply(&views[1])
+        .unwrap()
+        .points()
+        .iter()
+        .map(|p| [p[0], p[1], 0.0])
+        .collect();
+    views[1] = dir.path().join("flat.ply");
+    write_ply(&views[1], &flat, None).unwrap();
+    let out = dir.path().join("out");
+    let assert = mtpcr()
+        .arg("register")
+        .args(args_of(&views))
+        .arg("--output")
+        .arg(&out)
+        .args(FAST)
+        .assert()
+        .success();
+    let stderr = String::from_utf8_lossy(&assert.get_output().stderr).into_owned();
+    assert_eq!(
+        stderr.lines().collect::<Vec<_>>(),
+        [format!(
+            "warning: cloud 2 is planar: its rotation about the plane normal is weakly \
+             determined ({})",
+            views[1].display()
+        )],
+        "one warning, for cloud 2 only"
+    );
+    assert!(out.join("result.json").is_file());
+}
+
+#[test]
+fn a_collinear_cloud_or_huge_coordinates_are_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let views = write_views(dir.path());
+    let line = dir.path().join("line.ply");
+    let points: Vec<[f64; 3]> = (0..100)
+        .map(|i| {
+            let t = f64::from(i) * 0.01;
+            [t, 2.0 * t - 1.0, 0.5 * t]
+        })
+        .collect();
+    write_ply(&line, &points, None).unwrap();
+    let huge = dir.path().join("huge.ply");
+    let mut points = read_ply(&views[0]).unwrap().into_points();
+    points[5][2] = 1e300;
+    write_ply(&huge, &points, None).unwrap();
+    let out = dir.path().join("out");
+    for (bad, needles) in [
+        (&line, ["line.ply", "on one line"]),
+        (&huge, ["huge.ply", "point 5"]),
+    ] {
+        let stderr = fails_with(
+            mtpcr()
+                .arg("register")
+                .arg(bad)
+                .args(args_of(&views[1..]))
+                .arg("--output")
+                .arg(&out)
+                .args(FAST),
+            1,
+            &needles,
+        );
+        assert!(!stderr.contains("NaN"), "{stderr}");
+        assert!(!out.exists(), "no folder for a run that never started");
+    }
+}
+
+/// Starts `mtpcr register` on `views` with settings that take minutes, in `cwd`, with `extra`
+/// arguments; sends SIGINT once it has read its clouds (its handler is installed and its
+/// output folder exists by then); returns its exit code and stderr.
+#[cfg(unix)]
+fn interrupted_register(cwd: &Path, views: &[PathBuf], extra: &[&str]) -> (Option<i32>, String) {
+    use nix::sys::signal::{kill, Signal};
+    use nix::unistd::Pid;
+    use std::io::BufRead;
+    use std::time::{Duration, Instant};
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_mtpcr"))
+        .current_dir(cwd)
+        .arg("register")
+        .args(args_of(views))
+        .args(["--generations", "1000000", "--population-size", "2000"])
+        .args(extra)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let stderr = child.stderr.take().unwrap();
+    let (tx, rx) = std::sync::mpsc::channel();
+    let reader = std::thread::spawn(move || {
+        let mut all = String::new();
+        for line in std::io::BufReader::new(stderr).lines() {
+            let line = line.unwrap();
+            let _ = tx.send(line.clone());
+            all.push_str(&line);
+            all.push('\n');
+        }
+        all
+    });
+    let last = views.last().unwrap().display().to_string();
+    let deadline = Instant::now() + Duration::from_secs(120);
+    loop {
+        let line = rx
+            .recv_timeout(deadline.saturating_duration_since(Instant::now()))
+            .expect("the run never reported reading its last cloud");
+        if line.starts_with(&format!("read {last}")) {
+            break;
+        }
+    }
+    let pid = Pid::from_raw(i32::try_from(child.id()).unwrap());
+    kill(pid, Signal::SIGINT).unwrap();
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        if Instant::now() > deadline {
+            child.kill().unwrap();
+            panic!("the run did not stop within 60 s of SIGINT");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    (status.code(), reader.join().unwrap())
+}
+
+#[cfg(unix)]
+#[test]
+fn ctrl_c_removes_the_folder_it_created_and_exits_130() {
+    let dir = tempfile::tempdir().unwrap();
+    let views = write_views(dir.path());
+    // A given folder, with a parent this run creates too.
+    let out = dir.path().join("new").join("out");
+    let (code, stderr) =
+        interrupted_register(dir.path(), &views, &["--output", out.to_str().unwrap()]);
+    assert_eq!(code, Some(130), "{stderr}");
+    assert!(stderr.ends_with("interrupted\n"), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(
+        !dir.path().join("new").exists(),
+        "the folders it created remain"
+    );
+
+    // The default folder results/<timestamp>, and results/ itself.
+    let (code, stderr) = interrupted_register(dir.path(), &views, &[]);
+    assert_eq!(code, Some(130), "{stderr}");
+    assert!(
+        !dir.path().join("results").exists(),
+        "an empty results folder remains"
+    );
+}
+
+#[cfg(unix)]
+#[test]
+fn ctrl_c_keeps_a_folder_it_did_not_create_as_it_was() {
+    let dir = tempfile::tempdir().unwrap();
+    let views = write_views(dir.path());
+    let out = dir.path().join("out");
+    std::fs::create_dir(&out).unwrap();
+    let (code, stderr) = interrupted_register(dir.path(), &views, &["--output", "out"]);
+    assert_eq!(code, Some(130), "{stderr}");
+    assert!(out.is_dir());
+    assert!(file_names(&out).is_empty(), "{:?}", file_names(&out));
+
+    std::fs::write(out.join("notes.txt"), "keep me").unwrap();
+    let (code, stderr) = interrupted_register(dir.path(), &views, &["--output", "out", "--force"]);
+    assert_eq!(code, Some(130), "{stderr}");
+    assert_eq!(file_names(&out), ["notes.txt"]);
 }
 
 #[test]

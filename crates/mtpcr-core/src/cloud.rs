@@ -8,6 +8,24 @@ use rand::Rng;
 use rand_distr::{Distribution, Normal};
 use std::num::NonZero;
 
+/// The largest coordinate magnitude [`PointCloud::validate`] accepts (1e30: the observable
+/// universe is 9e26 m across). Beyond about 1e150 squared distances overflow f64 and the
+/// transforms become NaN; beyond about 1e37 the fast distance field, which stores distances
+/// as f32 (at most 3.4e38), overflows and the costs become NaN (fuzzing found both). Rescale
+/// such data (other units) or re-centre it before registering it.
+pub const MAX_COORDINATE: f64 = 1e30;
+
+/// [`PointCloud::validate`] rejects a cloud as collinear when the variance of its points along
+/// their second principal axis is at most this fraction of the variance along the first (a
+/// width, as a standard deviation, of at most 1e-6 of the length): the rotation about the
+/// line is then undetermined.
+pub const COLLINEAR_RATIO: f64 = 1e-12;
+
+/// [`PointCloud::is_planar`] calls a cloud planar when the variance of its points along their
+/// third principal axis is at most this fraction of the variance along the first (a thickness,
+/// as a standard deviation, of at most 1/1000 of the spread).
+pub const PLANAR_RATIO: f64 = 1e-6;
+
 /// A set of 3D points (coordinates in f64, in the data's units).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct PointCloud {
@@ -64,7 +82,12 @@ impl PointCloud {
     }
 
     /// Checks that the cloud is usable for registration: at least `min_points` points, all
-    /// coordinates finite, not all points identical. `name` is used in the error message.
+    /// coordinates finite and at most [`MAX_COORDINATE`] in absolute value (so squared
+    /// distances and bounding box sides stay finite), not all points identical, and not all
+    /// on one line (see [`COLLINEAR_RATIO`]: the rotation about that line would be
+    /// undetermined). `name` is used in the error message.
+    ///
+    /// A planar cloud passes; [`PointCloud::is_planar`] tells the front-ends to warn about it.
     pub fn validate(&self, name: &str, min_points: usize) -> Result<()> {
         if self.points.is_empty() {
             return Err(Error::EmptyCloud {
@@ -88,6 +111,24 @@ impl PointCloud {
                 value: value.to_string(),
             });
         }
+        if let Some((index, p)) = self
+            .points
+            .iter()
+            .enumerate()
+            .find(|(_, p)| p.iter().any(|v| v.abs() > MAX_COORDINATE))
+        {
+            let value = p
+                .iter()
+                .copied()
+                .find(|v| v.abs() > MAX_COORDINATE)
+                .unwrap_or(f64::INFINITY);
+            return Err(Error::CoordinateTooLarge {
+                cloud: name.to_string(),
+                index,
+                value: format!("{value:e}"),
+                limit: format!("{MAX_COORDINATE:e}"),
+            });
+        }
         if self.points.len() < min_points {
             return Err(Error::TooFewPoints {
                 cloud: name.to_string(),
@@ -101,7 +142,54 @@ impl PointCloud {
                 cloud: name.to_string(),
             });
         }
+        if self.principal_ratios()[0] <= COLLINEAR_RATIO {
+            return Err(Error::CollinearCloud {
+                cloud: name.to_string(),
+            });
+        }
         Ok(())
+    }
+
+    /// True when the cloud is (nearly) flat: the variance of the points along their thinnest
+    /// principal axis is at most [`PLANAR_RATIO`] (1e-6) times the variance along their widest,
+    /// i.e. its thickness (standard deviation) is at most 1/1000 of its spread. Such a cloud
+    /// can be registered, but its rotation about the plane's normal rests on the in-plane
+    /// shape alone and is weakly determined; the CLI and Python warn about it.
+    /// A collinear or empty cloud is planar too.
+    pub fn is_planar(&self) -> bool {
+        self.principal_ratios()[1] <= PLANAR_RATIO
+    }
+
+    /// The principal component analysis of the points: the variances along the second and
+    /// the third principal axes divided by the variance along the first (each in `0..=1`;
+    /// both 0 for a cloud with no extent). Computed on the centred points scaled by the
+    /// largest bounding box side, so it neither overflows nor depends on the units.
+    fn principal_ratios(&self) -> [f64; 2] {
+        let side = self.largest_side();
+        if self.points.len() < 2 || !(side > 0.0 && side.is_finite()) {
+            return [0.0, 0.0];
+        }
+        let c = self.centroid();
+        let mut cov = nalgebra::Matrix3::<f64>::zeros();
+        for p in &self.points {
+            let d = nalgebra::Vector3::new(
+                (p[0] - c[0]) / side,
+                (p[1] - c[1]) / side,
+                (p[2] - c[2]) / side,
+            );
+            cov += d * d.transpose();
+        }
+        cov /= self.points.len() as f64;
+        let mut eig: Vec<f64> = cov
+            .symmetric_eigenvalues()
+            .iter()
+            .map(|v| v.max(0.0))
+            .collect();
+        eig.sort_by(|a, b| b.total_cmp(a));
+        if !(eig[0] > 0.0 && eig[0].is_finite()) {
+            return [0.0, 0.0];
+        }
+        [eig[1] / eig[0], eig[2] / eig[0]]
     }
 
     /// Mean of the points (the origin for an empty cloud).
@@ -422,6 +510,90 @@ mod tests {
             })
         ));
         assert!(random_cloud(50, 1).validate("c", 10).is_ok());
+    }
+
+    #[test]
+    fn huge_coordinates_are_rejected_naming_the_point() {
+        let mut pts = random_cloud(50, 2).into_points();
+        pts[7][1] = 1e308;
+        let e = PointCloud::new(pts).validate("cloud 3", 10).unwrap_err();
+        assert!(
+            matches!(e, Error::CoordinateTooLarge { index: 7, .. }),
+            "{e}"
+        );
+        let text = e.to_string();
+        assert!(
+            text.contains("cloud 3") && text.contains("point 7") && text.contains("1e308"),
+            "{text}"
+        );
+        for (scale, ok) in [(1e300, false), (-1e31, false), (5e29, true)] {
+            let scaled = PointCloud::new(
+                random_cloud(50, 3)
+                    .points()
+                    .iter()
+                    .map(|p| p.map(|v| (v + 0.5) * scale))
+                    .collect(),
+            );
+            let r = scaled.validate("c", 10);
+            assert_eq!(r.is_ok(), ok, "scale {scale}: {r:?}");
+        }
+    }
+
+    /// Points `origin + t * direction` for `n` values of `t`, plus `offset(i)` off the line.
+    fn line(n: usize, offset: impl Fn(usize) -> [f64; 3]) -> PointCloud {
+        let (o, d) = ([3.0, -2.0, 7.0], [0.3, 0.5, -0.8]);
+        PointCloud::new(
+            (0..n)
+                .map(|i| {
+                    let t = i as f64 / 7.0;
+                    let e = offset(i);
+                    [0, 1, 2].map(|k| o[k] + t * d[k] + e[k])
+                })
+                .collect(),
+        )
+    }
+
+    #[test]
+    fn collinear_clouds_are_rejected_thin_ones_are_not() {
+        let e = line(100, |_| [0.0; 3]).validate("cloud 2", 10).unwrap_err();
+        assert!(matches!(e, Error::CollinearCloud { .. }), "{e}");
+        assert!(
+            e.to_string().contains("cloud 2") && e.to_string().contains("line"),
+            "{e}"
+        );
+        // Far from the origin, in big units: still a line.
+        let far = line(100, |_| [0.0; 3]).translated([1e7, -3e7, 2e7]);
+        assert!(matches!(
+            far.validate("c", 10),
+            Err(Error::CollinearCloud { .. })
+        ));
+        // A thin rod (width about 1e-5 of its length) is a cloud, if a weak (and flat) one.
+        let rod = line(100, |i| {
+            let a = i as f64 * 2.4;
+            [1e-4 * a.cos(), 1e-4 * a.sin(), 0.0]
+        });
+        assert!(rod.validate("c", 10).is_ok());
+        assert!(rod.is_planar(), "a rod is flat too");
+    }
+
+    #[test]
+    fn planar_clouds_are_detected_by_their_thickness() {
+        let slab = |thickness: f64| {
+            PointCloud::new(
+                random_cloud(500, 8)
+                    .points()
+                    .iter()
+                    .map(|p| [p[0] * 4.0, p[1] * 3.0 - 1.0, (p[2] - 0.5) * thickness])
+                    .collect(),
+            )
+            .transformed(&crate::se3::decode(&[0.3, -1.1, 0.7, 5.0, 6.0, 7.0]))
+        };
+        for (thickness, planar) in [(0.0, true), (1e-4, true), (1e-2, false), (3.0, false)] {
+            let c = slab(thickness);
+            assert!(c.validate("c", 10).is_ok(), "thickness {thickness}");
+            assert_eq!(c.is_planar(), planar, "thickness {thickness}");
+        }
+        assert!(!random_cloud(100, 9).is_planar());
     }
 
     #[test]

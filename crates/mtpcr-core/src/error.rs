@@ -33,6 +33,31 @@ pub enum Error {
         /// The bad value, printed.
         value: String,
     },
+    /// A coordinate is so large (beyond [`crate::cloud::MAX_COORDINATE`] in absolute value) that
+    /// distances or squared distances would overflow.
+    #[error(
+        "{cloud}: point {index} has a coordinate too large to register ({value}; the limit is \
+         {limit} in absolute value): rescale or re-centre the cloud"
+    )]
+    CoordinateTooLarge {
+        /// Which cloud.
+        cloud: String,
+        /// Index of the first bad point.
+        index: usize,
+        /// The bad value, printed.
+        value: String,
+        /// The largest magnitude accepted, printed.
+        limit: String,
+    },
+    /// Every point lies on one line, so the rotation about that line cannot be determined.
+    #[error(
+        "{cloud}: all points lie on one line (the rotation about it cannot be determined); \
+         a cloud must extend in at least two directions"
+    )]
+    CollinearCloud {
+        /// Which cloud.
+        cloud: String,
+    },
     /// The cloud has no spatial extent (every point identical), so no spacing can be derived.
     #[error("{cloud}: all points are identical (the cloud has no extent)")]
     DegenerateCloud {

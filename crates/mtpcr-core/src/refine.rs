@@ -176,6 +176,11 @@ pub(crate) fn refine_poses(
         .iter()
         .flat_map(|e| [(e.source, e.target), (e.target, e.source)])
         .collect();
+    // Nothing to move (and nalgebra's LU solve of a 0 x 0 system reads out of bounds:
+    // a segfault found by fuzzing `register` with one cloud placed of four).
+    if poses.len() < 2 {
+        return poses;
+    }
     // Six unknowns (rotation, translation) per cloud but the first.
     let unknowns = 6 * (poses.len() - 1);
     for it in 0..iterations {
@@ -367,6 +372,17 @@ mod tests {
             .map(|pose| rotation_error_deg(&pose.to_matrix(), &ident))
             .fold(0.0, f64::max);
         assert!(worst < 0.3, "{worst} deg");
+    }
+
+    #[test]
+    fn refinement_of_one_cloud_or_none_returns_the_poses() {
+        let [points, _, _] = strips(3, 0.0);
+        let cloud = RefineCloud::new(points);
+        let pose = Rigid::from_individual(&[0.0; 6]);
+        let pool = two_threads();
+        let one = refine_poses(&[&cloud], &[], vec![pose], 0.02, 5, &pool);
+        assert_eq!(one, vec![pose]);
+        assert!(refine_poses(&[], &[], Vec::new(), 0.02, 5, &pool).is_empty());
     }
 
     #[test]

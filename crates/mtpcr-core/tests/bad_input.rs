@@ -1,7 +1,7 @@
 //! Every kind of bad input gives a clear error that names the problem, never a panic.
 
 use mtpcr_core::io::read_ply;
-use mtpcr_core::{register, synthetic, Config, Error, PointCloud};
+use mtpcr_core::{register, synthetic, Config, Error, Method, PointCloud};
 
 fn clouds() -> Vec<PointCloud> {
     synthetic::three_views(31, 2000).clouds
@@ -62,6 +62,78 @@ fn all_points_identical() {
     c[0] = PointCloud::new(vec![[0.3, 0.3, 0.3]; 500]);
     let e = register(&c, &quick(), None).unwrap_err();
     assert!(matches!(e, Error::DegenerateCloud { .. }), "{e}");
+}
+
+/// A point at 1e308 or a whole cloud scaled by 1e300 used to give NaN transforms; now an error
+/// names the cloud and the point.
+#[test]
+fn finite_but_huge_coordinates() {
+    let mut c = clouds();
+    let mut pts = c[1].points().to_vec();
+    pts[42][0] = 1e308;
+    c[1] = PointCloud::new(pts);
+    let e = register(&c, &quick(), None).unwrap_err();
+    assert!(
+        matches!(e, Error::CoordinateTooLarge { index: 42, .. }),
+        "{e}"
+    );
+    assert!(
+        e.to_string().contains("cloud 2") && e.to_string().contains("point 42"),
+        "{e}"
+    );
+
+    let scaled = |s: f64| -> Vec<PointCloud> {
+        clouds()
+            .iter()
+            .map(|c| PointCloud::new(c.points().iter().map(|p| p.map(|v| v * s)).collect()))
+            .collect()
+    };
+    let e = register(&scaled(1e300), &quick(), None).unwrap_err();
+    assert!(
+        matches!(e, Error::CoordinateTooLarge { index: 0, .. }),
+        "{e}"
+    );
+    // Just under the limit every method runs, with finite costs and transforms (at 1e50 the
+    // fast distance field's f32 values overflowed: NaN costs, and MFEA panicked).
+    let largest = clouds()
+        .iter()
+        .flat_map(|c| c.points().iter().flatten().map(|v| v.abs()))
+        .fold(0.0, f64::max);
+    let near_limit = scaled(0.99 * mtpcr_core::cloud::MAX_COORDINATE / largest);
+    for method in [Method::Mtpcr, Method::Mfea, Method::Gmfea] {
+        let r = register(&near_limit, &Config { method, ..quick() }, None).unwrap();
+        assert!(
+            r.history.iter().flatten().all(|v| v.is_finite()),
+            "{method:?}: {:?}",
+            r.history
+        );
+        for e in &r.edges {
+            assert!(
+                e.t_target_source.iter().all(|v| v.is_finite()),
+                "{method:?}: {}",
+                e.t_target_source
+            );
+        }
+    }
+}
+
+#[test]
+fn collinear_cloud() {
+    let mut c = clouds();
+    c[2] = PointCloud::new(
+        (0..300)
+            .map(|i| {
+                let t = i as f64 * 0.01;
+                [0.2 + t, -0.1 + 2.0 * t, 0.5 - 0.3 * t]
+            })
+            .collect(),
+    );
+    let e = register(&c, &quick(), None).unwrap_err();
+    assert!(matches!(e, Error::CollinearCloud { .. }), "{e}");
+    assert!(
+        e.to_string().contains("cloud 3") && e.to_string().contains("line"),
+        "{e}"
+    );
 }
 
 #[test]

@@ -4,7 +4,7 @@
 use mtpcr_core::{PointCloud, Transform};
 use numpy::ndarray::{Array2, Array3};
 use numpy::{PyArray2, PyArray3, PyArrayDyn, PyArrayMethods, PyUntypedArrayMethods};
-use pyo3::exceptions::{PyTypeError, PyValueError};
+use pyo3::exceptions::{PyTypeError, PyUserWarning, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyFloat, PyString};
 use serde_json::Value;
@@ -57,9 +57,47 @@ fn type_name(obj: &Bound<'_, PyAny>) -> String {
         .unwrap_or_else(|_| "an object".to_string())
 }
 
-/// Anything numpy can view as an `(N, 3)` array of numbers (any float or int dtype, C or
-/// Fortran order, nested lists), or an object with such a `.points` attribute (an Open3D
-/// `PointCloud`, say), as points. Shape errors name `name`.
+/// What a points argument must be, for error messages.
+const POINTS: &str = "an (N, 3) array of real numbers (or an object with one as `.points`)";
+
+/// `array` (a numpy array) if its dtype holds real numbers: float, signed or unsigned int; an
+/// object array whose elements are all such numbers is converted. Booleans, complex numbers,
+/// strings, bytes, objects that are not numbers, dates and records are refused (numpy would
+/// cast them silently) with a `ValueError` naming `name` and the dtype.
+fn real_numbers<'py>(array: Bound<'py, PyAny>, name: &str) -> PyResult<Bound<'py, PyAny>> {
+    let kind = |a: &Bound<'py, PyAny>| -> PyResult<String> {
+        a.getattr("dtype")?.getattr("kind")?.extract()
+    };
+    let real = |kind: &str| matches!(kind, "f" | "i" | "u");
+    let mut dtype = array.getattr("dtype")?.str()?.to_string();
+    if kind(&array)? == "O" {
+        // Numbers held as Python objects: numpy infers the elements' own dtype.
+        let elements = array
+            .py()
+            .import("numpy")?
+            .call_method1("asarray", (array.call_method0("tolist")?,));
+        if let Ok(elements) = elements {
+            if real(&kind(&elements)?) {
+                return Ok(elements);
+            }
+            if kind(&elements)? != "O" {
+                dtype = format!("{dtype} holding {}", elements.getattr("dtype")?.str()?);
+            }
+        }
+    }
+    if real(&kind(&array)?) {
+        return Ok(array);
+    }
+    Err(PyValueError::new_err(format!(
+        "{name} must be {POINTS}, got dtype {dtype} (booleans, complex numbers, strings and \
+         objects that are not numbers are not coordinates)"
+    )))
+}
+
+/// Anything numpy can view as an `(N, 3)` array of real numbers (any float or int dtype, C
+/// or Fortran order, nested lists, an object array of numbers), or an object with such a
+/// `.points` attribute (an Open3D `PointCloud`, say), as points. Shape and dtype errors name
+/// `name`; booleans, complex numbers, strings and other objects are refused.
 pub(crate) fn points_from_py(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<[f64; 3]>> {
     // Arrays and lists are taken as they are; anything else with `.points` gives those.
     let is_array_like = obj.hasattr("__array__")?
@@ -70,13 +108,8 @@ pub(crate) fn points_from_py(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec
     } else {
         obj.clone()
     };
-    let array = as_numpy(
-        &source,
-        Some("float64"),
-        name,
-        "an (N, 3) array of numbers (or an object with one as `.points`)",
-    )?;
-    let array = array.cast_into::<PyArrayDyn<f64>>()?;
+    let array = real_numbers(as_numpy(&source, None, name, POINTS)?, name)?;
+    let array = as_numpy(&array, Some("float64"), name, POINTS)?.cast_into::<PyArrayDyn<f64>>()?;
     let shape = array.shape();
     if shape.len() != 2 || shape[1] != 3 {
         return Err(PyValueError::new_err(format!(
@@ -90,12 +123,21 @@ pub(crate) fn points_from_py(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec
 }
 
 /// A cloud argument of `register`: converted, then checked by the core under the argument's
-/// own name (empty, non-finite coordinates, too few points, no extent).
+/// own name (empty, non-finite or huge coordinates, too few points, no extent, collinear).
+/// A planar cloud ([`PointCloud::is_planar`]) is accepted with a `UserWarning`.
 pub(crate) fn cloud_from_py(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<PointCloud> {
     let cloud = PointCloud::new(points_from_py(obj, name)?);
     cloud
         .validate(name, mtpcr_core::MIN_POINTS)
         .map_err(crate::errors::to_py)?;
+    if cloud.is_planar() {
+        let py = obj.py();
+        let message = std::ffi::CString::new(format!(
+            "{name} is planar: its rotation about the plane normal is weakly determined"
+        ))
+        .map_err(|e| PyValueError::new_err(e.to_string()))?;
+        PyErr::warn(py, &py.get_type::<PyUserWarning>(), &message, 1)?;
+    }
     Ok(cloud)
 }
 

@@ -27,6 +27,8 @@ pub(crate) fn to_py(err: Error) -> PyErr {
         | Error::TooFewPoints { .. }
         | Error::NonFiniteCoordinate { .. }
         | Error::DegenerateCloud { .. }
+        | Error::CoordinateTooLarge { .. }
+        | Error::CollinearCloud { .. }
         | Error::InvalidConfig { .. }
         | Error::MalformedFile { .. }
         | Error::InvalidInput(_) => PyValueError::new_err(err.to_string()),

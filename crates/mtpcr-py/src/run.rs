@@ -44,9 +44,12 @@ fn call_observer(
 /// ..., ``Tn1``) and one pose per cloud. ``T_ij`` maps points of cloud i into the frame of
 /// cloud j (``x_j = T_ij @ [x_i, 1]``), in the clouds' own frames.
 ///
-/// Each cloud is anything numpy can view as an ``(N, 3)`` array of numbers (float32 or
-/// float64, C or Fortran order, nested lists); it needs at least ``MIN_POINTS`` finite points
-/// that are not all identical. ``seed`` fixes the run (the same seed, settings and clouds
+/// Each cloud is anything numpy can view as an ``(N, 3)`` array of real numbers (float or
+/// int, C or Fortran order, nested lists, an object array of numbers; booleans, complex
+/// numbers and strings are refused); it needs at least ``MIN_POINTS`` finite points of
+/// magnitude at most 1e30, not all identical and not all on one line. A planar cloud is
+/// registered with a ``UserWarning`` (its rotation about the plane normal is weakly
+/// determined). ``seed`` fixes the run (the same seed, settings and clouds
 /// give the same result, whatever ``num_threads``); without one the config's seed is used, or
 /// one is drawn, and it is reported as ``Registration.seed``. ``config`` is a :class:`Config`
 /// to start from (default ``Config()``); any other keyword is a ``Config`` field that

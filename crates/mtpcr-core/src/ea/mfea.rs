@@ -84,7 +84,9 @@ struct Member {
 
 impl Member {
     fn evaluated_on(&self, s: usize) -> bool {
-        self.local[s] < f64::INFINITY
+        // Not evaluated is +infinity; a NaN cost (degenerate input) still counts as
+        // evaluated, ranked last by `total_cmp`, so every task keeps a member.
+        self.local[s] != f64::INFINITY
     }
 }
 
