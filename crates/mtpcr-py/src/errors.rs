@@ -33,6 +33,7 @@ pub(crate) fn to_py(err: Error) -> PyErr {
         | Error::MalformedFile { .. }
         | Error::InvalidInput(_) => PyValueError::new_err(err.to_string()),
         Error::UnknownSetting { .. } => PyTypeError::new_err(err.to_string()),
+        Error::Interrupted => pyo3::exceptions::PyKeyboardInterrupt::new_err("interrupted"),
         _ => PyRuntimeError::new_err(err.to_string()),
     }
 }

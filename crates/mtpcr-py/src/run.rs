@@ -3,10 +3,14 @@
 use crate::config::{apply_settings, config_to_dict, kwargs_pairs, PyConfig};
 use crate::convert::{cloud_from_py, transform_to_py, transforms_to_py};
 use crate::errors::to_py;
-use mtpcr_core::{Config, Progress, Registration};
+use mtpcr_core::{Config, Interrupt, Progress, Registration};
+use std::sync::Mutex;
+
+/// How often the waiting thread checks for Ctrl-C.
+const WAIT_SLICE: std::time::Duration = std::time::Duration::from_millis(50);
 use numpy::ndarray::Array2;
 use numpy::{PyArray2, PyArray3};
-use pyo3::exceptions::{PyAttributeError, PyTypeError, PyValueError};
+use pyo3::exceptions::{PyAttributeError, PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
 use std::ops::ControlFlow;
@@ -124,33 +128,58 @@ pub(crate) fn register(
         .map_err(to_py)?
         .task_names();
 
-    // The engine runs without the GIL; the observer takes it back once per generation to
-    // check for Ctrl-C and to call the user's callback. A Python error stops the run and is
-    // raised once the engine has returned.
-    let mut failure: Option<PyErr> = None;
-    let outcome = py.detach(|| {
-        let mut observer = |progress: &Progress| -> ControlFlow<()> {
-            Python::attach(|py| {
-                let verdict = py.check_signals().and_then(|()| match &callback {
-                    Some(f) => call_observer(py, f, &names, progress),
-                    None => Ok(true),
-                });
-                match verdict {
+    // The engine runs on a worker thread without the GIL; its observer takes the GIL once
+    // per generation to call the user's callback. This thread waits, checking for Ctrl-C
+    // every 50 ms: a KeyboardInterrupt sets the engine's interrupt flag (it stops within
+    // a step: sampling, a generation, a refinement iteration) and is raised once it has.
+    let failure: Mutex<Option<PyErr>> = Mutex::new(None);
+    let interrupt = Interrupt::new();
+    let outcome = std::thread::scope(|scope| {
+        let worker = scope.spawn(|| {
+            let mut observer = |progress: &Progress| -> ControlFlow<()> {
+                let Some(f) = &callback else {
+                    return ControlFlow::Continue(());
+                };
+                Python::attach(|py| match call_observer(py, f, &names, progress) {
                     Ok(true) => ControlFlow::Continue(()),
                     Ok(false) => ControlFlow::Break(()),
                     Err(e) => {
-                        failure = Some(e);
+                        if let Ok(mut slot) = failure.lock() {
+                            slot.get_or_insert(e);
+                        }
                         ControlFlow::Break(())
                     }
+                })
+            };
+            mtpcr_core::register_interruptible(
+                &clouds,
+                &config,
+                Some(&mut observer),
+                interrupt.clone(),
+            )
+        });
+        while !py.detach(|| {
+            let start = std::time::Instant::now();
+            while !worker.is_finished() && start.elapsed() < WAIT_SLICE {
+                std::thread::sleep(std::time::Duration::from_millis(2));
+            }
+            worker.is_finished()
+        }) {
+            if let Err(e) = py.check_signals() {
+                interrupt.interrupt();
+                if let Ok(mut slot) = failure.lock() {
+                    slot.get_or_insert(e);
                 }
-            })
-        };
-        mtpcr_core::register(&clouds, &config, Some(&mut observer))
+            }
+        }
+        worker.join()
     });
-    if let Some(e) = failure {
+    if let Some(e) = failure.into_inner().ok().flatten() {
         return Err(e);
     }
     py.check_signals()?;
+    let outcome =
+        outcome.map_err(|_| PyRuntimeError::new_err("the registration thread panicked"))?;
     let inner = outcome.map_err(to_py)?;
     let mut used = config;
     used.seed = Some(inner.seed);
