@@ -140,7 +140,7 @@ settings! {
     /// Paper: 1.
     restarts: usize = 1,
     /// Stop the restarts as soon as two of them end on the same transforms (every edge
-    /// within 2 degrees; beyond the paper): more restarts would change the cost, not the
+    /// within 5 degrees; beyond the paper): more restarts would change the cost, not the
     /// answer. Paper: false.
     stop_when_restarts_agree: bool = false,
     /// Iterations of the joint trimmed point-to-plane ICP of all clouds after the evolution,
