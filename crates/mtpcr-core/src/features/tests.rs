@@ -1,3 +1,6 @@
+//! Tests of the feature hypotheses: synthetic registrations across large rotations,
+//! determinism, degenerate input, descriptor invariance, and an ignored table on real scans.
+
 use super::describe::{pair_features, voxel_downsample};
 use super::ransac::{kabsch, rotation_angle_deg};
 use super::*;
