@@ -1,5 +1,5 @@
-//! A whole `Config::paper()` run (preparation included) on bunny-a, on 1 and 2 threads, and a
-//! `Config::default()` run on 2 threads.
+//! A whole `Config::paper()` run (preparation included) on bunny-a, on 1 and 2 threads, a
+//! `Config::default()` run on 2 threads, and default runs on 40k- and 1M-point scans.
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use mtpcr_benches::bunny_a_or_synthetic;
@@ -37,5 +37,26 @@ fn whole_run(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, whole_run);
+/// A default run on synthetic views of 40,000 and of 1,000,000 points each (the same shape):
+/// with `max_sample_points`, preparation and search cost about the same at any scan size.
+fn by_scan_size(c: &mut Criterion) {
+    let mut group = c.benchmark_group("default_run_by_scan_size");
+    group.sample_size(10);
+    for points in [40_000usize, 1_000_000] {
+        let clouds = mtpcr_core::synthetic::three_views(1, points).clouds;
+        let config = Config {
+            seed: Some(1),
+            num_threads: 2,
+            ..Config::default()
+        };
+        group.bench_with_input(
+            BenchmarkId::new("points", points),
+            &clouds,
+            |bench, clouds| bench.iter(|| register(clouds, &config, None).expect("runs")),
+        );
+    }
+    group.finish();
+}
+
+criterion_group!(benches, whole_run, by_scan_size);
 criterion_main!(benches);
