@@ -380,9 +380,9 @@ mod tests {
         let cloud = RefineCloud::new(points);
         let pose = Rigid::from_individual(&[0.0; 6]);
         let pool = two_threads();
-        let one = refine_poses(&[&cloud], &[], vec![pose], 0.02, 5, &pool);
+        let one = refine_poses(&[&cloud], &[], vec![pose], 0.02, 5, &pool, &|| false);
         assert_eq!(one, vec![pose]);
-        assert!(refine_poses(&[], &[], Vec::new(), 0.02, 5, &pool).is_empty());
+        assert!(refine_poses(&[], &[], Vec::new(), 0.02, 5, &pool, &|| false).is_empty());
     }
 
     #[test]
