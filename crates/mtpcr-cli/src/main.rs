@@ -60,16 +60,17 @@ enum Command {
         #[command(flatten)]
         run: RunArgs,
     },
-    /// Register PLY files (two, or three or more in loop order) and write a results folder.
+    /// Register two point clouds or more and write a results folder.
     ///
-    /// Two clouds give T12; three or more, given in loop order (cloud k overlaps cloud k+1,
-    /// the last closes the loop with the first), give T12, T23, ..., Tn1. The folder holds
+    /// Each file is PLY, PCD, E57 (every scan in it is a cloud), LAS/LAZ or XYZ text. Two
+    /// clouds give T12; more give each cloud's pose in cloud 1's frame (with --order given:
+    /// clouds in loop order, T12, T23, ..., Tn1). The folder holds
     /// result.json, config.toml (the settings, to repeat the run), transforms.txt, merged.ply
     /// (the clouds in cloud 1's frame, one colour per view), convergence.png, views.png and
     /// view.html (an interactive 3-D view that opens offline).
     Register {
-        /// The clouds, in loop order.
-        #[arg(num_args = 2.., required = true, value_name = "CLOUD.ply")]
+        /// The point-cloud files (one E57 file of several scans is enough).
+        #[arg(num_args = 1.., required = true, value_name = "CLOUD")]
         clouds: Vec<PathBuf>,
         /// Output folder [default: results/<UTC timestamp>]; must be new or empty unless --force.
         #[arg(long, short, value_name = "DIR")]
@@ -208,6 +209,14 @@ fn read_clouds(paths: &[PathBuf], quiet: bool) -> CliResult<(Vec<PointCloud>, Ve
             clouds.push(scan.cloud);
             labels.push(label);
         }
+    }
+    if clouds.len() < 2 {
+        return Err(Failure(format!(
+            "at least two clouds are needed, got {} ({}); give two files or more, or an E57 \
+             file of several scans",
+            clouds.len(),
+            labels.join(", ")
+        )));
     }
     Ok((clouds, labels))
 }
