@@ -1,5 +1,6 @@
 //! A whole `Config::paper()` run (preparation included) on bunny-a, on 1 and 2 threads, a
-//! `Config::default()` run on 2 threads, and default runs on 40k- and 1M-point scans.
+//! `Config::default()` run on 2 threads beside the default it replaced, and default runs on
+//! 40k- and 1M-point scans.
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use mtpcr_benches::bunny_a_or_synthetic;
@@ -23,7 +24,9 @@ fn whole_run(c: &mut Criterion) {
     }
     group.finish();
 
-    // The recommended setting (4 restarts of 30 generations and joint ICP refinement).
+    // The recommended setting, and the one it replaced on 2026-12-01 (clouds in loop order,
+    // no feature hypotheses, all sampled points, four full restarts of 100 x 30): one run of
+    // this group gives the ratio of the two.
     let mut group = c.benchmark_group(format!("default_run/{label}"));
     group.sample_size(10);
     let config = Config {
@@ -33,6 +36,18 @@ fn whole_run(c: &mut Criterion) {
     };
     group.bench_function("threads/2", |bench| {
         bench.iter(|| register(&clouds, &config, None).expect("runs"))
+    });
+    let previous = Config {
+        order: mtpcr_core::Order::Given,
+        hypotheses: 0,
+        max_sample_points: 0,
+        stop_when_restarts_agree: false,
+        population_size: 100,
+        generations: 30,
+        ..config.clone()
+    };
+    group.bench_function("previous_default/threads/2", |bench| {
+        bench.iter(|| register(&clouds, &previous, None).expect("runs"))
     });
     group.finish();
 }
