@@ -353,9 +353,19 @@ mod tests {
         let (p, d) = (Config::paper(), Config::default());
         assert_eq!((p.restarts, p.generations, p.refine_iterations), (1, 60, 0));
         assert_eq!(
-            (d.restarts, d.generations, d.refine_iterations),
-            (4, 30, 20)
+            (
+                d.restarts,
+                d.population_size,
+                d.generations,
+                d.refine_iterations
+            ),
+            (4, 50, 20, 20)
         );
+        assert_eq!(
+            (d.order, d.hypotheses, d.max_sample_points),
+            (Order::Auto, 10, 4000)
+        );
+        assert!(d.stop_when_restarts_agree && !p.stop_when_restarts_agree);
         assert_eq!(Config::paper().evaluations(6), 72_600);
     }
 

@@ -38,6 +38,8 @@ pub(crate) struct RefineCloud {
     points: Vec<[f64; 3]>,
     /// Unit normal of each point (sign arbitrary).
     normals: Vec<[f64; 3]>,
+    /// See [`RefineCloud::self_residual`].
+    self_residual: f64,
 }
 
 /// The least-squares plane of some points.
@@ -151,12 +153,45 @@ impl RefineCloud {
         let (points, normals): (Vec<_>, Vec<_>) = surface.into_iter().unzip();
         let tree = ImmutableKdTree::<f64, 3>::new_from_slice(&points)
             .expect("a non-empty finite cloud always builds a KD-tree");
+        let self_residual = self_residual(&points, &normals);
         RefineCloud {
             tree,
             points,
             normals,
+            self_residual,
         }
     }
+
+    /// The median distance of the even-numbered surface points to the plane of their
+    /// nearest odd-numbered one: what a perfect fit of this scan onto another scan of the
+    /// same surface leaves (noise left after the projection, sampling, curvature).
+    pub fn self_residual(&self) -> f64 {
+        self.self_residual
+    }
+}
+
+/// See [`RefineCloud::self_residual`] (0 for fewer than two points).
+fn self_residual(points: &[[f64; 3]], normals: &[[f64; 3]]) -> f64 {
+    let odd: Vec<[f64; 3]> = points.iter().skip(1).step_by(2).copied().collect();
+    if odd.is_empty() {
+        return 0.0;
+    }
+    let tree = ImmutableKdTree::<f64, 3>::new_from_slice(&odd)
+        .expect("a non-empty finite cloud always builds a KD-tree");
+    let distances: Vec<f64> = points
+        .iter()
+        .step_by(2)
+        .map(|p| {
+            let m = tree
+                .query(p)
+                .nearest_one::<SquaredEuclidean<f64>>()
+                .execute()
+                .item as usize;
+            let (y, n) = (odd[m], normals[2 * m + 1]);
+            (0..3).map(|k| n[k] * (p[k] - y[k])).sum::<f64>().abs()
+        })
+        .collect();
+    median(distances)
 }
 
 /// Refines the poses of all clouds in cloud 0's frame (`poses[k]` maps cloud k into cloud 0;

@@ -190,8 +190,7 @@ impl PreparedProblem {
 
     /// Refines given edge transforms (original frames, in edge order; e.g. an earlier result
     /// or the user's own guess) by `config.refine_iterations` steps of the joint ICP that
-    /// `register` ends with. The result closes a loop exactly. The problem must have been
-    /// prepared with `refine_iterations > 0`.
+    /// `register` ends with. The result closes a loop exactly.
     pub fn refine(&self, transforms: &[Transform], config: &Config) -> Result<Vec<Transform>> {
         config.validate()?;
         if config.refine_iterations == 0 {

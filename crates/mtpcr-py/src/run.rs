@@ -291,7 +291,8 @@ impl PyRegistration {
     /// The verdict: a dict with ``confident``, ``reasons`` (list of str, empty when
     /// confident) and ``edges`` (per pair: ``source``, ``target``, ``overlap``: fraction of
     /// points within eps of the other cloud, ``residual``: their median distance to its
-    /// surface, relative to eps).
+    /// surface, relative to eps, ``self_residual``: the same for the two scans against
+    /// themselves, the larger; what a perfect fit would leave).
     #[getter]
     fn verdict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
         let text = serde_json::to_string(&self.inner.verdict)
