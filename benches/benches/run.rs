@@ -1,9 +1,9 @@
 //! A whole `Config::paper()` run (preparation included) on bunny-a, on 1 and 2 threads, a
-//! `Config::default()` run on 2 threads beside the default it replaced, and default runs on
-//! 40k- and 1M-point scans.
+//! `Config::default()` run on 2 threads beside the default it replaced, default runs on
+//! 40k- and 1M-point scans, and a default run on 15 scans in no known order.
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
-use mtpcr_benches::bunny_a_or_synthetic;
+use mtpcr_benches::{bunny_a_or_synthetic, dragon_all_or_synthetic};
 use mtpcr_core::{register, Config};
 
 fn whole_run(c: &mut Criterion) {
@@ -73,5 +73,21 @@ fn by_scan_size(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, whole_run, by_scan_size);
+/// A default run on 15 scans in no known order (the dragon turntable ring, or synthetic).
+fn fifteen_scans(c: &mut Criterion) {
+    let (clouds, label) = dragon_all_or_synthetic();
+    let mut group = c.benchmark_group(format!("default_run_15_scans/{label}"));
+    group.sample_size(10);
+    let config = Config {
+        seed: Some(1),
+        num_threads: 2,
+        ..Config::default()
+    };
+    group.bench_function("threads/2", |bench| {
+        bench.iter(|| register(&clouds, &config, None).expect("runs"))
+    });
+    group.finish();
+}
+
+criterion_group!(benches, whole_run, by_scan_size, fifteen_scans);
 criterion_main!(benches);
