@@ -152,7 +152,7 @@ settings! {
     hypotheses: usize = 0,
     /// Spacing of the feature keypoints, as a fraction of the clouds' mean principal-axes
     /// box diagonal, in (0, 0.5]. Paper: unused.
-    feature_voxel_ratio: f64 = crate::features::DEFAULT_VOXEL_FRACTION,
+    feature_voxel_ratio: f64 = 0.02,
     /// Worker threads for the loss evaluations; 0 = all cores, at most 4096 (more than four
     /// per core are not started). The result does not depend on it.
     num_threads: usize = 0,
