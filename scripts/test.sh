@@ -8,6 +8,14 @@ cd "$(dirname "$0")/.."
 
 echo "== cargo fmt --check"
 cargo fmt --all -- --check
+echo "== module circles in mtpcr-core"
+# The shared tool (../shared/tools, or $MTPCR_SHARED_DIR/tools) exits 1 on an import circle.
+cycles="${MTPCR_SHARED_DIR:-../shared}/tools/rust_module_cycles.py"
+if [ -f "$cycles" ]; then
+  python3 "$cycles" crates/mtpcr-core/src
+else
+  echo "skipped: $cycles not found"
+fi
 echo "== cargo clippy"
 cargo clippy --workspace --all-targets --release -- -D warnings
 echo "== cargo test"
