@@ -129,7 +129,7 @@ pub(crate) fn doubts(edges: &[EdgeCheck]) -> Vec<Option<String>> {
             let name = format!("{} -> {}", e.source + 1, e.target + 1);
             if e.overlap < MIN_OVERLAP {
                 Some(format!(
-                    "clouds {name} overlap by {:.2} only (at least {MIN_OVERLAP} expected)",
+                    "clouds {name} overlap by {:.3} only (at least {MIN_OVERLAP} expected)",
                     e.overlap
                 ))
             } else if e.residual > MAX_RESIDUAL {
