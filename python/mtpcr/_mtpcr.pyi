@@ -219,6 +219,13 @@ class Registration:
     def poses(self) -> NDArray[np.float64]:
         """Each cloud into cloud 1's frame (``poses[0]`` is the identity), shape (N, 4, 4);
         all NaN for a cloud that could not be placed."""
+    def transform_points(self, cloud: int, points: ArrayLike) -> NDArray[np.float64]:
+        """``points`` of cloud ``cloud`` (numbered from 0; an (N, 3) array or anything with
+        ``.points``) mapped into cloud 1's frame by its pose; ValueError when that cloud was
+        not placed."""
+    def merge(self, *clouds: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+        """The clouds given to ``register`` (same order) merged in cloud 1's frame: (M, 3)
+        points and the (M,) cloud index (from 0) of each; unplaced clouds left out."""
     @property
     def confident(self) -> bool:
         """Whether the result can be believed (every pair overlaps and its surfaces lie on

@@ -299,3 +299,22 @@ def test_two_clouds_and_four_in_a_loop(small_views):
     assert [e["name"] for e in r4.edges] == ["T12", "T23", "T34", "T41"]
     assert r4.history.shape[1] == 8 and r4.poses.shape == (4, 4, 4)
     assert r4.loop_residual is not None
+
+
+def test_points_are_placed_and_merged_in_cloud_1s_frame(small_views):
+    clouds = small_views.clouds
+    r = mtpcr.register(*clouds, seed=3, **QUICK)
+    # Cloud 1 stays where it is; cloud 2's points move by its pose.
+    np.testing.assert_array_equal(r.transform_points(0, clouds[0]), clouds[0])
+    np.testing.assert_allclose(r.transform_points(1, clouds[1]), apply(r.poses[1], clouds[1]))
+    points, cloud = r.merge(*clouds)
+    assert points.shape == (sum(len(c) for c in clouds), 3)
+    assert cloud.dtype == np.int64
+    for k, c in enumerate(clouds):
+        np.testing.assert_allclose(points[cloud == k], apply(r.poses[k], c))
+    with pytest.raises(ValueError, match="cloud 3 out of range: 3 clouds"):
+        r.transform_points(3, clouds[0])
+    with pytest.raises(ValueError, match="shape"):
+        r.transform_points(1, clouds[1][:, :2])
+    with pytest.raises(ValueError, match="2 clouds given, the registration has 3"):
+        r.merge(*clouds[:2])

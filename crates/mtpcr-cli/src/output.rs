@@ -351,18 +351,16 @@ pub fn write_results(dir: &Path, rec: &RunRecord<'_>) -> CliResult<Vec<String>> 
     write_file(&path("transforms.txt"), transforms_text(rec).as_bytes())?;
 
     // Unplaced clouds are left out of the merged cloud and the "after" pictures.
-    let moved: Vec<PointCloud> = rec
+    let moved: Vec<Vec<[f64; 3]>> = rec
         .clouds
         .iter()
-        .zip(&rec.result.poses)
-        .map(|(c, pose)| pose.map_or_else(PointCloud::default, |p| c.transformed(&p)))
+        .enumerate()
+        .map(|(k, c)| rec.result.place(k, c.points()).unwrap_or_default())
         .collect();
-    let mut points = Vec::with_capacity(moved.iter().map(PointCloud::len).sum());
-    let mut colors = Vec::with_capacity(points.capacity());
-    for (i, c) in moved.iter().enumerate() {
-        points.extend_from_slice(c.points());
-        colors.extend(std::iter::repeat_n(plots::view_color(i), c.len()));
-    }
+    let points = moved.concat();
+    let colors: Vec<_> = (0..moved.len())
+        .flat_map(|k| std::iter::repeat_n(plots::view_color(k), moved[k].len()))
+        .collect();
     write_atomically(&path("merged.ply"), |tmp| {
         Ok(write_ply(tmp, &points, Some(&colors))?)
     })?;
@@ -403,7 +401,7 @@ pub fn write_results(dir: &Path, rec: &RunRecord<'_>) -> CliResult<Vec<String>> 
         })
         .collect();
     let before: Vec<&[[f64; 3]]> = rec.clouds.iter().map(PointCloud::points).collect();
-    let after: Vec<&[[f64; 3]]> = moved.iter().map(PointCloud::points).collect();
+    let after: Vec<&[[f64; 3]]> = moved.iter().map(Vec::as_slice).collect();
     write_atomically(&path("views.png"), |tmp| {
         plots::views_png(&before, &after, &labels, tmp)
     })?;

@@ -2,7 +2,7 @@
 //! direction), one pose per view, and the record of the search.
 
 use crate::graph::Edge;
-use crate::se3::{invert_rigid, Transform};
+use crate::se3::{invert_rigid, Rigid, Transform};
 use crate::verdict::Verdict;
 
 /// The estimate of one edge. `t_target_source` maps points of view `source` into the frame of
@@ -124,6 +124,31 @@ impl Registration {
         }
         let (wt, ws) = ((*self.poses.get(target)?)?, (*self.poses.get(source)?)?);
         Some(invert_rigid(&wt) * ws)
+    }
+
+    /// `points` of view `view` mapped into view 0's frame by the view's pose; `None` when
+    /// the view is unplaced or out of range.
+    pub fn place(&self, view: usize, points: &[[f64; 3]]) -> Option<Vec<[f64; 3]>> {
+        let pose = Rigid::from_matrix(&(*self.poses.get(view)?)?);
+        Some(points.iter().map(|p| pose.apply(p)).collect())
+    }
+
+    /// The views' points (`clouds[k]` of view k) merged in view 0's frame, and the view each
+    /// point came from; unplaced views are left out. `None` when the number of clouds is not
+    /// the number of views.
+    pub fn merge(&self, clouds: &[&[[f64; 3]]]) -> Option<(Vec<[f64; 3]>, Vec<usize>)> {
+        if clouds.len() != self.poses.len() {
+            return None;
+        }
+        let mut points = Vec::with_capacity(clouds.iter().map(|c| c.len()).sum());
+        let mut views = Vec::with_capacity(points.capacity());
+        for (k, cloud) in clouds.iter().enumerate() {
+            if let Some(placed) = self.place(k, cloud) {
+                views.extend(std::iter::repeat_n(k, placed.len()));
+                points.extend(placed);
+            }
+        }
+        Some((points, views))
     }
 
     /// `||M_{n-1} ... M_0 - I||_F` for the edges of a ring (how far the transforms are from

@@ -114,6 +114,15 @@ fn a_scan_of_another_object_is_left_unplaced() {
         .collect();
     assert_placed(&placed, &v.poses, "the others");
     assert!(!r.verdict.confident);
+    // The unplaced scan has no place in the merged cloud.
+    assert_eq!(r.place(2, clouds[2].points()), None);
+    let points: Vec<&[[f64; 3]]> = clouds.iter().map(PointCloud::points).collect();
+    let (merged, from) = r.merge(&points).unwrap();
+    let all: usize = clouds.iter().map(PointCloud::len).sum();
+    let others = all - clouds[2].len();
+    assert_eq!((merged.len(), from.len()), (others, others));
+    assert!(!from.contains(&2));
+    assert_eq!(r.place(0, clouds[0].points()).unwrap(), clouds[0].points());
 }
 
 #[test]

@@ -1,7 +1,9 @@
 //! `register()` and its result class.
 
 use crate::config::{apply_settings, config_to_dict, kwargs_pairs, PyConfig};
-use crate::convert::{cloud_from_py, transform_to_py, transforms_to_py};
+use crate::convert::{
+    cloud_from_py, points_from_py, points_to_py, transform_to_py, transforms_to_py,
+};
 use crate::errors::to_py;
 use mtpcr_core::{Config, Interrupt, Progress, Registration};
 use std::sync::Mutex;
@@ -14,6 +16,9 @@ use pyo3::exceptions::{PyAttributeError, PyRuntimeError, PyTypeError, PyValueErr
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
 use std::ops::ControlFlow;
+
+/// Merged points and the cloud each came from.
+type Merged<'py> = (Bound<'py, PyArray2<f64>>, Bound<'py, numpy::PyArray1<i64>>);
 
 /// `{task name: cost}` in slot order.
 fn costs_dict<'py>(
@@ -278,6 +283,54 @@ impl PyRegistration {
         let nan = mtpcr_core::Transform::from_element(f64::NAN);
         let poses: Vec<_> = self.inner.poses.iter().map(|p| p.unwrap_or(nan)).collect();
         transforms_to_py(py, &poses)
+    }
+
+    /// ``points`` of cloud ``cloud`` (numbered from 0; an (N, 3) array or anything with
+    /// ``.points``) mapped into cloud 1's frame by the cloud's pose, an (N, 3) float64 array.
+    /// ValueError when that cloud was not placed.
+    fn transform_points<'py>(
+        &self,
+        py: Python<'py>,
+        cloud: usize,
+        points: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let points = points_from_py(points, "points")?;
+        let views = self.inner.poses.len();
+        if cloud >= views {
+            return Err(PyValueError::new_err(format!(
+                "cloud {cloud} out of range: {views} clouds, numbered from 0"
+            )));
+        }
+        let placed = self.inner.place(cloud, &points).ok_or_else(|| {
+            PyValueError::new_err(format!("cloud {cloud} was not placed (see `unplaced`)"))
+        })?;
+        Ok(points_to_py(py, &placed))
+    }
+
+    /// The clouds given to ``register`` (same order) merged in cloud 1's frame: an (M, 3)
+    /// float64 array and an (M,) int64 array of the cloud (from 0) each point came from.
+    /// Unplaced clouds are left out.
+    #[pyo3(signature = (*clouds))]
+    fn merge<'py>(&self, py: Python<'py>, clouds: &Bound<'py, PyTuple>) -> PyResult<Merged<'py>> {
+        let views = self.inner.poses.len();
+        if clouds.len() != views {
+            return Err(PyValueError::new_err(format!(
+                "{} clouds given, the registration has {views}",
+                clouds.len()
+            )));
+        }
+        let points: Vec<Vec<[f64; 3]>> = clouds
+            .iter()
+            .enumerate()
+            .map(|(k, c)| points_from_py(&c, &format!("cloud {k}")))
+            .collect::<PyResult<_>>()?;
+        let refs: Vec<&[[f64; 3]]> = points.iter().map(Vec::as_slice).collect();
+        let (merged, from) = self.inner.merge(&refs).expect("one cloud per view");
+        let from: Vec<i64> = from.into_iter().map(|k| k as i64).collect();
+        Ok((
+            points_to_py(py, &merged),
+            numpy::PyArray1::from_vec(py, from),
+        ))
     }
 
     /// Whether the result can be believed: every pair overlaps and its surfaces lie on each
