@@ -169,7 +169,7 @@ class Config:
     @property
     def stop_when_restarts_agree(self) -> bool:
         """Stop the restarts as soon as two of them end on the same transforms (every
-        edge within 2 degrees; beyond the paper): more restarts would change the cost,
+        edge within 5 degrees; beyond the paper): more restarts would change the cost,
         not the answer. Paper: false."""
     @property
     def refine_iterations(self) -> int:
