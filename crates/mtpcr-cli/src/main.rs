@@ -105,6 +105,10 @@ enum Command {
         /// rotations near zero) instead of moving each by a seeded random rigid motion.
         #[arg(long)]
         ground_truth_frame: bool,
+        /// Add Gaussian noise of this sigma to every scan first, as the paper's Table 3 (scan
+        /// centred and scaled to unit size; seeded from each run's seed).
+        #[arg(long, value_name = "SIGMA")]
+        noise: Option<f64>,
         #[command(flatten)]
         run: RunArgs,
     },
@@ -321,15 +325,43 @@ fn register_files(
     Ok(result.verdict.confident)
 }
 
+/// How each evaluation run starts.
+#[derive(Clone, Copy)]
+struct RunStart {
+    /// From the scans placed by their ground-truth poses, not moved.
+    ground_truth_frame: bool,
+    /// Noise sigma added to every scan first.
+    noise: Option<f64>,
+}
+
+/// The scans with the noise of the paper's protocol (`eval::protocol::add_noise`, seeded
+/// from the run's seed), or as they are.
+fn with_noise(
+    clouds: &[PointCloud],
+    noise: Option<f64>,
+    seed: u64,
+) -> CliResult<std::borrow::Cow<'_, [PointCloud]>> {
+    Ok(match noise {
+        Some(sigma) => {
+            std::borrow::Cow::Owned(mtpcr_core::eval::protocol::add_noise(clouds, sigma, seed)?)
+        }
+        None => std::borrow::Cow::Borrowed(clouds),
+    })
+}
+
 fn eval(
     problems: &[PathBuf],
     runs: usize,
     seed: Option<u64>,
     data_root: Option<&Path>,
     json: Option<&Path>,
-    ground_truth_frame: bool,
+    start: RunStart,
     run: &RunArgs,
 ) -> CliResult<()> {
+    let RunStart {
+        ground_truth_frame,
+        noise,
+    } = start;
     let mut config = settings::resolve(run, None)?;
     let seed = seed.or(config.seed).unwrap_or(0);
     config.seed = None;
@@ -353,6 +385,7 @@ fn eval(
                 &clouds,
                 runs,
                 seed,
+                noise,
                 &config,
                 &bar,
                 run.quiet,
@@ -372,6 +405,7 @@ fn eval(
                 r + 1,
                 runs
             ));
+            let clouds = with_noise(&clouds, noise, s)?;
             let (result, scores) = if ground_truth_frame {
                 mtpcr_core::eval::run_in_ground_truth_frame(&clouds, &problem.poses, &config, s)?
             } else {
@@ -479,6 +513,7 @@ fn eval_views(
     clouds: &[PointCloud],
     runs: usize,
     seed: u64,
+    noise: Option<f64>,
     config: &Config,
     bar: &indicatif::ProgressBar,
     quiet: bool,
@@ -494,8 +529,9 @@ fn eval_views(
             r + 1,
             runs
         ));
+        let clouds = with_noise(clouds, noise, s)?;
         let (result, scores) =
-            mtpcr_core::eval::run_moved_views(clouds, &problem.poses, config, s)?;
+            mtpcr_core::eval::run_moved_views(&clouds, &problem.poses, config, s)?;
         bar.inc(1);
         let placed: Vec<f64> = scores.rot_deg.iter().flatten().copied().collect();
         let worst = placed.iter().copied().fold(0.0, f64::max);
@@ -609,6 +645,7 @@ fn main() -> ExitCode {
             data_root,
             json,
             ground_truth_frame,
+            noise,
             run,
         } => eval(
             problems,
@@ -616,7 +653,10 @@ fn main() -> ExitCode {
             *seed,
             data_root.as_deref(),
             json.as_deref(),
-            *ground_truth_frame,
+            RunStart {
+                ground_truth_frame: *ground_truth_frame,
+                noise: *noise,
+            },
             run,
         )
         .map(|_| ExitCode::SUCCESS),

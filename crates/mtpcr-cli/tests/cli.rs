@@ -886,6 +886,30 @@ fn eval_runs_a_problem_file_and_reports_each_run() {
     assert_eq!(json["problems"][0]["runs"].as_array().unwrap().len(), 2);
     assert_eq!(views.len(), 3);
 
+    // With noise: the same seeds, other scans, so other transforms; a bad sigma is named.
+    let noisy = dir.path().join("noisy.json");
+    let eval_with = |extra: &[&str]| {
+        let mut cmd = mtpcr();
+        cmd.arg("eval")
+            .arg(&file)
+            .arg("--data-root")
+            .arg(dir.path())
+            .args(["--runs", "1", "--seed", "4", "-q"])
+            .args(["--generations", "3", "--population-size", "8"])
+            .args(extra);
+        cmd
+    };
+    eval_with(&["--noise", "0.01", "--json", noisy.to_str().unwrap()])
+        .assert()
+        .success();
+    let first = |j: &serde_json::Value| j["problems"][0]["runs"][0]["transforms"].clone();
+    assert_ne!(first(&read_json(&noisy)), first(&json));
+    fails_with(
+        &mut eval_with(&["--noise=-0.5"]),
+        1,
+        &["noise sigma must be finite and >= 0, got -0.5"],
+    );
+
     fails_with(
         mtpcr().arg("eval").arg(dir.path().join("none.json")),
         1,
