@@ -42,9 +42,8 @@ fn short_inputs() {
 #[test]
 #[ignore = "set MTPCR_FUZZ_REPLAY to the input files"]
 fn replay() {
-    let Some(files) = std::env::var_os("MTPCR_FUZZ_REPLAY") else {
-        return;
-    };
+    let files = std::env::var_os("MTPCR_FUZZ_REPLAY")
+        .expect("set MTPCR_FUZZ_REPLAY to the fuzzer's input files (separated by `:`)");
     for file in std::env::split_paths(&files) {
         let data = std::fs::read(&file).unwrap();
         let (config, clouds) = fuzz_input::decode(&data);
