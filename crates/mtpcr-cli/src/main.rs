@@ -379,7 +379,8 @@ fn eval(
     for problem in &loaded {
         bar.set_message(format!("{}: reading the scans", problem.name));
         let clouds = problem.read_scans()?;
-        if config.order == mtpcr_core::Order::Auto && clouds.len() >= 4 {
+        // Four scans or more are scored by their poses (every scan under 1 degree), in any order.
+        if clouds.len() >= 4 {
             let runs_json = eval_views(
                 problem,
                 &clouds,
