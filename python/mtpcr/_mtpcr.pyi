@@ -232,7 +232,8 @@ class Registration:
         each other; every cloud placed)."""
     @property
     def verdict(self) -> dict[str, Any]:
-        """``confident``, ``reasons`` and per pair ``overlap``, ``residual`` and ``self_residual``."""
+        """``confident``, ``reasons`` and per pair ``overlap``, ``residual`` and
+        ``self_residual``."""
     @property
     def unplaced(self) -> list[dict[str, Any]]:
         """Clouds that could not be placed: dicts with ``cloud`` (from 0) and ``reason``."""
