@@ -190,52 +190,40 @@ impl Default for Config {
 impl Config {
     /// Checks every field; the error names the first bad one.
     pub fn validate(&self) -> Result<()> {
-        fn check(
-            ok: bool,
-            field: &'static str,
-            rule: &str,
-            value: impl std::fmt::Display,
-        ) -> Result<()> {
-            if ok {
-                Ok(())
-            } else {
-                Err(Error::config(field, format!("must be {rule}, got {value}")))
-            }
-        }
         let unit = |v: f64| (0.0..=1.0).contains(&v);
         let n = self.population_size;
-        check(
+        Error::check_setting(
             (4..=1_000_000).contains(&n),
             "population_size",
             "in 4..=1000000",
             n,
         )?;
-        check(
+        Error::check_setting(
             self.generations <= 1_000_000,
             "generations",
             "at most 1000000",
             self.generations,
         )?;
         let r = self.sample_ratio;
-        check(r > 0.0 && r <= 1.0, "sample_ratio", "in (0, 1]", r)?;
+        Error::check_setting(r > 0.0 && r <= 1.0, "sample_ratio", "in (0, 1]", r)?;
         let m = self.max_sample_points;
-        check(
+        Error::check_setting(
             m == 0 || m >= MIN_SAMPLE_CAP,
             "max_sample_points",
             "0 or at least 100",
             m,
         )?;
-        check(unit(self.p_intra), "p_intra", "in [0, 1]", self.p_intra)?;
-        check(unit(self.p_inter), "p_inter", "in [0, 1]", self.p_inter)?;
+        Error::check_setting(unit(self.p_intra), "p_intra", "in [0, 1]", self.p_intra)?;
+        Error::check_setting(unit(self.p_inter), "p_inter", "in [0, 1]", self.p_inter)?;
         let t = self.top_ratio;
-        check(t > 0.0 && t <= 1.0, "top_ratio", "in (0, 1]", t)?;
+        Error::check_setting(t > 0.0 && t <= 1.0, "top_ratio", "in (0, 1]", t)?;
         let f = self.scale_factor;
-        check(f > 0.0 && f <= 2.0, "scale_factor", "in (0, 2]", f)?;
+        Error::check_setting(f > 0.0 && f <= 2.0, "scale_factor", "in (0, 2]", f)?;
         for (field, v) in [
             ("sbx_eta_start", self.sbx_eta_start),
             ("sbx_eta_end", self.sbx_eta_end),
         ] {
-            check(
+            Error::check_setting(
                 v.is_finite() && (0.0..=1000.0).contains(&v),
                 field,
                 "in [0, 1000]",
@@ -243,23 +231,23 @@ impl Config {
             )?;
         }
         let a = self.alpha;
-        check(a.is_finite() && a >= 0.0, "alpha", "finite and >= 0", a)?;
+        Error::check_setting(a.is_finite() && a >= 0.0, "alpha", "finite and >= 0", a)?;
         let c = self.aiding_cap_ratio;
-        check(c > 0.0 && c <= 10.0, "aiding_cap_ratio", "in (0, 10]", c)?;
-        check(
+        Error::check_setting(c > 0.0 && c <= 10.0, "aiding_cap_ratio", "in (0, 10]", c)?;
+        Error::check_setting(
             (1..=1000).contains(&self.restarts),
             "restarts",
             "in 1..=1000",
             self.restarts,
         )?;
         let it = self.refine_iterations;
-        check(it <= 10_000, "refine_iterations", "at most 10000", it)?;
+        Error::check_setting(it <= 10_000, "refine_iterations", "at most 10000", it)?;
         let h = self.hypotheses;
-        check(h <= 100, "hypotheses", "at most 100", h)?;
+        Error::check_setting(h <= 100, "hypotheses", "at most 100", h)?;
         let v = self.feature_voxel_ratio;
-        check(v > 0.0 && v <= 0.5, "feature_voxel_ratio", "in (0, 0.5]", v)?;
+        Error::check_setting(v > 0.0 && v <= 0.5, "feature_voxel_ratio", "in (0, 0.5]", v)?;
         let th = self.num_threads;
-        check(
+        Error::check_setting(
             th <= 4096,
             "num_threads",
             "at most 4096 (0 = all cores)",

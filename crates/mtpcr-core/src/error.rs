@@ -116,6 +116,21 @@ impl Error {
         }
     }
 
+    /// `Ok` when `ok`, else the error "`field` must be `rule`, got `value`" (the range checks
+    /// of every settings struct).
+    pub(crate) fn check_setting(
+        ok: bool,
+        field: &'static str,
+        rule: &str,
+        value: impl std::fmt::Display,
+    ) -> Result<()> {
+        if ok {
+            Ok(())
+        } else {
+            Err(Error::config(field, format!("must be {rule}, got {value}")))
+        }
+    }
+
     pub(crate) fn malformed(path: impl Into<PathBuf>, problem: impl Into<String>) -> Self {
         Error::MalformedFile {
             path: path.into(),

@@ -209,64 +209,52 @@ impl FeatureConfig {
 
     /// Checks every field's range; the error names the first bad field.
     pub fn validate(&self) -> Result<()> {
-        fn check(
-            ok: bool,
-            field: &'static str,
-            rule: &str,
-            value: impl std::fmt::Display,
-        ) -> Result<()> {
-            if ok {
-                Ok(())
-            } else {
-                Err(Error::config(field, format!("must be {rule}, got {value}")))
-            }
-        }
         let positive = |v: f64| v.is_finite() && v > 0.0;
-        check(positive(self.voxel), "voxel", "finite and > 0", self.voxel)?;
-        check(
+        Error::check_setting(positive(self.voxel), "voxel", "finite and > 0", self.voxel)?;
+        Error::check_setting(
             positive(self.normal_radius),
             "normal_radius",
             "finite and > 0",
             self.normal_radius,
         )?;
         let k = self.normal_max_neighbours;
-        check(k >= 3, "normal_max_neighbours", ">= 3", k)?;
-        check(
+        Error::check_setting(k >= 3, "normal_max_neighbours", ">= 3", k)?;
+        Error::check_setting(
             positive(self.feature_radius),
             "feature_radius",
             "finite and > 0",
             self.feature_radius,
         )?;
         let k = self.feature_max_neighbours;
-        check(k >= 1, "feature_max_neighbours", ">= 1", k)?;
-        check(
+        Error::check_setting(k >= 1, "feature_max_neighbours", ">= 1", k)?;
+        Error::check_setting(
             self.max_iterations >= 1,
             "max_iterations",
             ">= 1",
             self.max_iterations,
         )?;
         let c = self.confidence;
-        check(c > 0.0 && c <= 1.0, "confidence", "in (0, 1]", c)?;
+        Error::check_setting(c > 0.0 && c <= 1.0, "confidence", "in (0, 1]", c)?;
         let e = self.edge_length_ratio;
-        check(e > 0.0 && e < 1.0, "edge_length_ratio", "in (0, 1)", e)?;
+        Error::check_setting(e > 0.0 && e < 1.0, "edge_length_ratio", "in (0, 1)", e)?;
         let d = self.inlier_distance;
-        check(positive(d), "inlier_distance", "finite and > 0", d)?;
+        Error::check_setting(positive(d), "inlier_distance", "finite and > 0", d)?;
         let a = self.max_normal_angle_deg;
-        check(
+        Error::check_setting(
             a > 0.0 && a <= 180.0,
             "max_normal_angle_deg",
             "in (0, 180]",
             a,
         )?;
-        check(
+        Error::check_setting(
             self.num_candidates >= 1,
             "num_candidates",
             ">= 1",
             self.num_candidates,
         )?;
         let a = self.nms_angle_deg;
-        check(a > 0.0 && a <= 180.0, "nms_angle_deg", "in (0, 180]", a)?;
-        check(
+        Error::check_setting(a > 0.0 && a <= 180.0, "nms_angle_deg", "in (0, 180]", a)?;
+        Error::check_setting(
             positive(self.nms_distance),
             "nms_distance",
             "finite and > 0",
