@@ -102,7 +102,8 @@ enum Command {
         #[arg(long, value_name = "FILE")]
         json: Option<PathBuf>,
         /// Start every run from the scans placed by their ground-truth poses (relative
-        /// rotations near zero) instead of moving each by a seeded random rigid motion.
+        /// rotations near zero) instead of moving each by a seeded random rigid motion
+        /// (problems of two or three scans).
         #[arg(long)]
         ground_truth_frame: bool,
         /// Add Gaussian noise of this sigma to every scan first, as the paper's Table 3 (scan
@@ -372,6 +373,16 @@ fn eval(
         .iter()
         .map(|p| Problem::load(p, data_root))
         .collect::<Result<_, _>>()?;
+    if let Some(p) = loaded
+        .iter()
+        .find(|p| ground_truth_frame && p.scans.len() >= 4)
+    {
+        return Err(Failure(format!(
+            "--ground-truth-frame applies to problems of two or three scans; {} has {}",
+            p.name,
+            p.scans.len()
+        )));
+    }
     let bar = progress::run_bar(loaded.len() * runs, run.quiet, "eval");
     let mut report = Vec::new();
     let mut rows = Vec::new();

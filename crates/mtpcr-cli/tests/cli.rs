@@ -910,6 +910,25 @@ fn eval_runs_a_problem_file_and_reports_each_run() {
         &["noise sigma must be finite and >= 0, got -0.5"],
     );
 
+    // Four scans are scored by their poses from moved scans only.
+    let four = dir.path().join("four.json");
+    let mut problem4 = problem.clone();
+    problem4["scans"] = serde_json::json!(["view1.ply", "view2.ply", "view3.ply", "view1.ply"]);
+    problem4["poses"] = serde_json::json!([poses[0], poses[1], poses[2], poses[0]]
+        .iter()
+        .map(mtpcr_core::io::matrix_rows)
+        .collect::<Vec<_>>());
+    std::fs::write(&four, problem4.to_string()).unwrap();
+    fails_with(
+        mtpcr()
+            .arg("eval")
+            .arg(&four)
+            .arg("--data-root")
+            .arg(dir.path())
+            .arg("--ground-truth-frame"),
+        1,
+        &["--ground-truth-frame applies to problems of two or three scans; synthetic has 4"],
+    );
     fails_with(
         mtpcr().arg("eval").arg(dir.path().join("none.json")),
         1,
