@@ -11,11 +11,14 @@ rigid motion. About 60-80 % of a view's points lie on its neighbour in the loop.
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pytest
+
+import mtpcr
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 
@@ -118,11 +121,29 @@ def shared_dir() -> Path:
     """The shared data folder (``mtpcr.find_shared_dir``: ``$MTPCR_SHARED_DIR``, else the
     nearest ``shared/`` beside the working directory or an ancestor); skips the calling test,
     with the reason, when there is none."""
-    import mtpcr
-
     found = mtpcr.find_shared_dir()
     if found is None:
         pytest.skip(
             "no shared data found (set MTPCR_SHARED_DIR to the folder holding problems/ and data/)"
         )
     return Path(found)
+
+
+@pytest.fixture(scope="module")
+def problem_file(tmp_path_factory) -> Path:
+    """A synthetic three-scan problem file (PLY scans beside it, ground-truth poses)."""
+    folder = tmp_path_factory.mktemp("problem")
+    views = three_views(seed=9, points_per_view=800)
+    # Scan-to-world poses: cloud 1 is the world; T12 = inv(pose2) @ pose1, so pose2 = inv(T12).
+    t12, t23, _ = views.ground_truth
+    poses = [np.eye(4), np.linalg.inv(t12), np.linalg.inv(t23 @ t12)]
+    scans = []
+    for i, cloud in enumerate(views.clouds):
+        path = folder / f"scan{i + 1}.ply"
+        mtpcr.write_ply(path, cloud)
+        scans.append(str(path))
+    file = folder / "synthetic.json"
+    file.write_text(
+        json.dumps({"name": "synthetic", "scans": scans, "poses": [p.tolist() for p in poses]})
+    )
+    return file

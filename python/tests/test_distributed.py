@@ -202,25 +202,6 @@ def test_a_results_file_resumes(scan_sets, tmp_path):
     assert other.key != results[0].key and other.history.shape[0] == 4
 
 
-@pytest.fixture(scope="module")
-def problem_file(tmp_path_factory) -> Path:
-    """A synthetic three-scan problem file (PLY scans beside it, ground-truth poses)."""
-    folder = tmp_path_factory.mktemp("problem")
-    views = three_views(seed=9, points_per_view=800)
-    t12, t23, _ = views.ground_truth
-    poses = [np.eye(4), np.linalg.inv(t12), np.linalg.inv(t23 @ t12)]
-    scans = []
-    for i, cloud in enumerate(views.clouds):
-        path = folder / f"scan{i + 1}.ply"
-        mtpcr.write_ply(path, cloud)
-        scans.append(str(path))
-    file = folder / "synthetic.json"
-    file.write_text(
-        json.dumps({"name": "synthetic", "scans": scans, "poses": [p.tolist() for p in poses]})
-    )
-    return file
-
-
 def test_problem_files_as_items(problem_file):
     results = distributed.register_batch(
         [distributed.Item(problem_file, seed=s) for s in (1, 2)] + [str(problem_file)],

@@ -8,32 +8,11 @@ import os
 import subprocess
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 import mtpcr
 
-from conftest import REPO_ROOT, three_views
-
-
-@pytest.fixture(scope="module")
-def problem_file(tmp_path_factory) -> Path:
-    """A synthetic three-scan problem file (scans as PLY, identity ground-truth poses)."""
-    folder = tmp_path_factory.mktemp("problem")
-    views = three_views(seed=9, points_per_view=800)
-    # Scan-to-world poses: cloud 1 is the world; T12 = inv(pose2) @ pose1, so pose2 = inv(T12).
-    t12, t23, _ = views.ground_truth
-    poses = [np.eye(4), np.linalg.inv(t12), np.linalg.inv(t23 @ t12)]
-    scans = []
-    for i, cloud in enumerate(views.clouds):
-        path = folder / f"scan{i + 1}.ply"
-        mtpcr.write_ply(path, cloud)
-        scans.append(str(path))
-    file = folder / "synthetic.json"
-    file.write_text(
-        json.dumps({"name": "synthetic", "scans": scans, "poses": [p.tolist() for p in poses]})
-    )
-    return file
+from conftest import REPO_ROOT
 
 
 def mtpcr_binary() -> Path:
