@@ -24,9 +24,10 @@ fn whole_run(c: &mut Criterion) {
     }
     group.finish();
 
-    // The recommended setting, and the one it replaced on 2026-12-01 (clouds in loop order,
-    // no feature hypotheses, all sampled points, four full restarts of 100 x 30): one run of
-    // this group gives the ratio of the two.
+    // The recommended setting, the one it replaced on 2026-12-01 (clouds in loop order,
+    // no feature hypotheses, all sampled points, four full restarts of 100 x 30), and the
+    // population of the default before 2026-12-03 (50 x 20, at most 4000 samples; today's
+    // refinement and distance field in both): one run of this group gives the ratios.
     let mut group = c.benchmark_group(format!("default_run/{label}"));
     group.sample_size(10);
     let config = Config {
@@ -48,6 +49,15 @@ fn whole_run(c: &mut Criterion) {
     };
     group.bench_function("previous_default/threads/2", |bench| {
         bench.iter(|| register(&clouds, &previous, None).expect("runs"))
+    });
+    let population_50x20 = Config {
+        max_sample_points: 4000,
+        population_size: 50,
+        generations: 20,
+        ..config.clone()
+    };
+    group.bench_function("population_50x20/threads/2", |bench| {
+        bench.iter(|| register(&clouds, &population_50x20, None).expect("runs"))
     });
     group.finish();
 }

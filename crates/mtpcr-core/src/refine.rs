@@ -57,8 +57,8 @@ pub(crate) struct RefineCloud {
     normals: Vec<[f64; 3]>,
     /// See [`RefineCloud::self_residual`].
     self_residual: f64,
-    /// The mean distance from a surface point to its nearest other surface point (duplicates
-    /// skipped; 0 when there is no such point).
+    /// The median distance from a surface point to its nearest other surface point
+    /// (duplicates skipped; 0 when there is no such point).
     spacing: f64,
 }
 
@@ -178,7 +178,7 @@ impl RefineCloud {
         let tree = ImmutableKdTree::<f64, 3>::new_from_slice(&points)
             .expect("a non-empty finite cloud always builds a KD-tree");
         let self_residual = self_residual(&points, &normals);
-        let spacing = mean_spacing(&tree, &points);
+        let spacing = median_spacing(&tree, &points);
         RefineCloud {
             tree,
             points,
@@ -196,8 +196,9 @@ impl RefineCloud {
     }
 }
 
-/// The `spacing` of a [`RefineCloud`].
-fn mean_spacing(tree: &ImmutableKdTree<f64, 3>, points: &[[f64; 3]]) -> f64 {
+/// The `spacing` of a [`RefineCloud`]: the median, so that a stray point far from the scan
+/// does not stretch it (the mean did: one point 50 units away made it 20x larger).
+fn median_spacing(tree: &ImmutableKdTree<f64, 3>, points: &[[f64; 3]]) -> f64 {
     if points.len() < 2 {
         return 0.0;
     }
@@ -215,7 +216,7 @@ fn mean_spacing(tree: &ImmutableKdTree<f64, 3>, points: &[[f64; 3]]) -> f64 {
                 .map(|r| r.distance.sqrt())
         })
         .collect();
-    distances.iter().sum::<f64>() / distances.len().max(1) as f64
+    median(distances)
 }
 
 /// See [`RefineCloud::self_residual`] (0 for fewer than two points).
@@ -246,7 +247,7 @@ fn self_residual(points: &[[f64; 3]], normals: &[[f64; 3]]) -> f64 {
 /// `poses[0]` is the identity and stays so) by `iterations` steps of joint trimmed ICP over
 /// the `edges` (pairs of overlapping clouds, each used in both directions). The trimming
 /// distance shrinks linearly from `3 eps` (what the search leaves) to
-/// [`FINAL_TRIM_SPACINGS`] times the clouds' mean surface spacing (never above `3 eps`) over
+/// [`FINAL_TRIM_SPACINGS`] times the clouds' mean surface spacing (each a median) (never above `3 eps`) over
 /// the first half of the iterations and stays there for the second.
 /// Deterministic for any number of threads.
 pub(crate) fn refine_poses(
@@ -520,11 +521,15 @@ mod tests {
     }
 
     #[test]
-    fn repeated_points_do_not_make_the_spacing_zero() {
+    fn repeated_or_stray_points_do_not_change_the_spacing_much() {
         let [points, _, _] = strips(4, 0.0);
         let once = RefineCloud::new(points.clone()).spacing;
         let twice = RefineCloud::new(points.iter().flat_map(|p| [*p, *p]).collect()).spacing;
         assert!(once > 0.0 && twice > 0.0, "{once} {twice}");
+        let mut with_stray = points.clone();
+        with_stray.push([50.0, 0.0, 0.0]);
+        let stray = RefineCloud::new(with_stray).spacing;
+        assert!((stray - once).abs() < 0.01 * once, "{once} {stray}");
     }
 
     #[test]
