@@ -165,7 +165,7 @@ const MIN_SAMPLE_CAP: usize = 100;
 
 impl Default for Config {
     /// The recommended setting: the paper's method with measured changes (RESULTS.md has
-    /// the numbers): up to 4 independent evolutions of 12 generations of 30 individuals
+    /// the numbers): up to 4 independent evolutions of 8 generations of 30 individuals
     /// per population instead of one of 60 of 100, stopped when two agree; 10 feature
     /// hypotheses per edge in the initial populations (the evolution starts in the right
     /// basins, so a short one suffices); at most 2500 points per sample;
@@ -179,7 +179,7 @@ impl Default for Config {
             stop_when_restarts_agree: true,
             restarts: 4,
             population_size: 30,
-            generations: 12,
+            generations: 8,
             aiding_cap_ratio: 0.3,
             two_way_aiding: true,
             refine_iterations: 20,
@@ -348,7 +348,7 @@ mod tests {
                 d.generations,
                 d.refine_iterations
             ),
-            (4, 30, 12, 20)
+            (4, 30, 8, 20)
         );
         assert_eq!(
             (d.order, d.hypotheses, d.max_sample_points),

@@ -20,7 +20,8 @@ use std::time::Instant;
 pub const MIN_POINTS: usize = 10;
 /// With `max_sample_points`, farthest-point sampling starts from an even subset of at most
 /// this many times the sample (the farthest points of a dense scan are the same, and the
-/// cost no longer grows with the scan's size).
+/// cost no longer grows with the scan's size). 4 samples bunny-a in a third of the time
+/// (0.03 s against 0.08 s) but lost a 48-degree triple (dragon48-k00, seed 2) that 16 keeps.
 const PRE_SAMPLE: usize = 16;
 
 /// The clouds of a view graph, downsampled, centred and indexed (see the module docs).

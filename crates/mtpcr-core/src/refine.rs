@@ -14,6 +14,8 @@ use rayon::prelude::*;
 /// Surface points kept per cloud for the refinement at most (a deterministic stride subset);
 /// they are both the sources and the targets of the ICP.
 const MAX_SURFACE_POINTS: usize = 8000;
+/// Iterations over which the trim shrinks (at most half of them).
+const SHRINK_ITERATIONS: usize = 5;
 /// The joint ICP has converged when a step at the final trim turns no cloud by more than
 /// this many radians and moves none by more than [`CONVERGED_SHIFT`] times the trim.
 const CONVERGED_ROTATION: f64 = 1e-6;
@@ -244,12 +246,12 @@ fn self_residual(points: &[[f64; 3]], normals: &[[f64; 3]]) -> f64 {
 }
 
 /// Refines the poses of all clouds in cloud 0's frame (`poses[k]` maps cloud k into cloud 0;
-/// `poses[0]` is the identity and stays so) by `iterations` steps of joint trimmed ICP over
-/// the `edges` (pairs of overlapping clouds, each used in both directions). The trimming
-/// distance shrinks linearly from `3 eps` (what the search leaves) to
-/// [`FINAL_TRIM_SPACINGS`] times the clouds' mean surface spacing (each a median) (never above `3 eps`) over
-/// the first half of the iterations and stays there for the second.
-/// Deterministic for any number of threads.
+/// `poses[0]` is the identity and stays so) by at most `iterations` steps of joint trimmed
+/// ICP over the `edges` (pairs of overlapping clouds, each used in both directions). The
+/// trimming distance shrinks linearly from `3 eps` (what the search leaves) to
+/// [`FINAL_TRIM_SPACINGS`] times the clouds' mean surface spacing (each a median; never
+/// above `3 eps`) over the first [`SHRINK_ITERATIONS`] (at most half of them), then stays
+/// there until the poses converge. Deterministic for any number of threads.
 pub(crate) fn refine_poses(
     clouds: &[&RefineCloud],
     edges: &[Edge],
@@ -281,10 +283,13 @@ pub(crate) fn refine_poses(
         if stop() {
             break;
         }
-        // Shrink over the first half, then let the ICP converge at the final trim (shrinking
-        // to the last step left the buddha triples up to 20 % further off).
+        // Shrink over the first few iterations, then let the ICP converge at the final trim
+        // (shrinking to the last step left the buddha triples up to 20 % further off; a
+        // shorter shrink ends at the same poses in fewer iterations: 7-13 on the six problems
+        // instead of 14-18 with a shrink over half of 20).
+        let shrink = SHRINK_ITERATIONS.min((iterations - 1) / 2).max(1);
         let frac = if iterations > 1 {
-            (2.0 * it as f64 / (iterations - 1) as f64).min(1.0)
+            (it as f64 / shrink as f64).min(1.0)
         } else {
             1.0
         };
