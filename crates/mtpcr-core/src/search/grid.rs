@@ -20,17 +20,26 @@ const FULL: u32 = 1;
 pub struct InlierGrid {
     frame: GridFrame,
     dims_f: [f64; 3],
-    /// Per cell: `EMPTY`, `FULL`, or `2 + k` for candidate list `k`.
+    /// Per cell: `EMPTY`, `FULL`, or `2 + k` for mixed cell `k`.
     cells: Vec<u32>,
-    /// Candidate list `k` is `candidates[starts[k]..starts[k + 1]]`.
-    starts: Vec<u32>,
+    mixed: Vec<MixedCell>,
     candidates: Vec<[f64; 3]>,
-    /// Per mixed cell `k`, one bit per sub-cell of a 4x4x4 split: sub-cells wholly within eps
-    /// of one candidate (`full`) and sub-cells out of reach of every candidate (`empty`).
-    /// Only the remaining sub-cells test candidates.
-    sub_full: Vec<u64>,
-    sub_empty: Vec<u64>,
     eps2: f64,
+}
+
+/// What a query landing in a mixed cell reads, in one place (near the surface almost every
+/// query lands in one, and the lookup is bound by memory: one cache line instead of four
+/// scattered arrays).
+#[derive(Clone, Copy, Debug)]
+struct MixedCell {
+    /// One bit per sub-cell of a 4x4x4 split: sub-cells wholly within eps of one candidate.
+    full: u64,
+    /// Sub-cells out of reach of every candidate. Only the remaining sub-cells test
+    /// candidates.
+    empty: u64,
+    /// The cell's candidates are `candidates[start..end]`.
+    start: u32,
+    end: u32,
 }
 
 /// Sub-cells per cell side in the inlier grid's mixed cells (4 -> 64 bits).
@@ -94,10 +103,8 @@ impl InlierGrid {
             }
         }
         pairs.sort_unstable();
-        let mut starts = vec![0u32];
+        let mut mixed = Vec::new();
         let mut candidates = Vec::new();
-        let mut sub_full = Vec::new();
-        let mut sub_empty = Vec::new();
         let hs = h / SUB as f64;
         let mut g = 0;
         while g < pairs.len() {
@@ -107,10 +114,9 @@ impl InlierGrid {
                 e += 1;
             }
             if cells[c as usize] != FULL {
-                cells[c as usize] = 2 + (starts.len() as u32 - 1);
+                cells[c as usize] = 2 + mixed.len() as u32;
                 let first = candidates.len();
                 candidates.extend(pairs[g..e].iter().map(|&(_, pi)| points[pi as usize]));
-                starts.push(candidates.len() as u32);
                 let cu = c as usize;
                 let cell_idx = [
                     cu % frame.dims[0],
@@ -135,8 +141,12 @@ impl InlierGrid {
                         empty |= 1 << bit;
                     }
                 }
-                sub_full.push(full);
-                sub_empty.push(empty);
+                mixed.push(MixedCell {
+                    full,
+                    empty,
+                    start: first as u32,
+                    end: candidates.len() as u32,
+                });
             }
             g = e;
         }
@@ -145,10 +155,8 @@ impl InlierGrid {
             frame,
             dims_f,
             cells,
-            starts,
+            mixed,
             candidates,
-            sub_full,
-            sub_empty,
             eps2,
         }
     }
@@ -184,13 +192,14 @@ impl InlierIndex for InlierGrid {
                 // f >= 0 here, so truncation is floor (and avoids a libm call).
                 let sub = |f: f64| (((f - (f as usize) as f64) * SUB as f64) as usize).min(SUB - 1);
                 let bit = 1u64 << (sub(fx) + SUB * (sub(fy) + SUB * sub(fz)));
-                if self.sub_full[k] & bit != 0 {
+                let cell = &self.mixed[k];
+                if cell.full & bit != 0 {
                     return true;
                 }
-                if self.sub_empty[k] & bit != 0 {
+                if cell.empty & bit != 0 {
                     return false;
                 }
-                let (s, e) = (self.starts[k] as usize, self.starts[k + 1] as usize);
+                let (s, e) = (cell.start as usize, cell.end as usize);
                 self.candidates[s..e]
                     .iter()
                     .any(|q| dist2(p, q) <= self.eps2)
@@ -200,8 +209,7 @@ impl InlierIndex for InlierGrid {
 
     fn memory_bytes(&self) -> usize {
         self.cells.len() * 4
-            + self.starts.len() * 4
+            + self.mixed.len() * std::mem::size_of::<MixedCell>()
             + self.candidates.len() * 24
-            + self.sub_full.len() * 16
     }
 }
