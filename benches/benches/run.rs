@@ -47,18 +47,20 @@ fn whole_run(c: &mut Criterion) {
         generations: 30,
         ..config.clone()
     };
-    group.bench_function("previous_default/threads/2", |bench| {
-        bench.iter(|| register(&clouds, &previous, None).expect("runs"))
-    });
     let population_50x20 = Config {
         max_sample_points: 4000,
         population_size: 50,
         generations: 20,
         ..config.clone()
     };
-    group.bench_function("population_50x20/threads/2", |bench| {
-        bench.iter(|| register(&clouds, &population_50x20, None).expect("runs"))
-    });
+    for (name, other) in [
+        ("previous_default/threads/2", &previous),
+        ("population_50x20/threads/2", &population_50x20),
+    ] {
+        group.bench_function(name, |bench| {
+            bench.iter(|| register(&clouds, other, None).expect("runs"))
+        });
+    }
     group.finish();
 }
 

@@ -456,6 +456,27 @@ mod tests {
         ]
     }
 
+    /// The worst rotation error (degrees, against the identity: the truth of [`strips`]) after
+    /// 40 joint ICP steps on 2 threads from [`misaligned_start`] around a ring of the strips.
+    fn worst_degrees_after_refining(strips: [Vec<[f64; 3]>; 3], eps: f64) -> f64 {
+        let clouds = strips.map(RefineCloud::new);
+        let clouds: Vec<&RefineCloud> = clouds.iter().collect();
+        let ring = crate::graph::ViewGraph::ring(3).unwrap();
+        let est = refine_poses(
+            &clouds,
+            ring.edges(),
+            misaligned_start().to_vec(),
+            eps,
+            40,
+            &two_threads(),
+            &|| false,
+        );
+        let ident = Rigid::from_individual(&[0.0; 6]).to_matrix();
+        est.iter()
+            .map(|pose| rotation_error_deg(&pose.to_matrix(), &ident))
+            .fold(0.0, f64::max)
+    }
+
     #[test]
     fn plane_fits_grow_with_the_noise() {
         for (sigma, lo, hi) in [(0.0, 12, 12), (0.02, 96, 384)] {
@@ -471,24 +492,7 @@ mod tests {
         // Noise of sigma 0.02, twice the point spacing: with plane fits over 12 neighbours
         // (the earlier fixed size) the worst pose here is 0.44 deg off; sized from the noise,
         // 0.23 deg.
-        let clouds = strips(7, 0.02).map(RefineCloud::new);
-        let ring = crate::graph::ViewGraph::ring(3).unwrap();
-        let (pool, start) = (two_threads(), misaligned_start());
-        let clouds: Vec<&RefineCloud> = clouds.iter().collect();
-        let est = refine_poses(
-            &clouds,
-            ring.edges(),
-            start.to_vec(),
-            0.04,
-            40,
-            &pool,
-            &|| false,
-        );
-        let ident = Rigid::from_individual(&[0.0; 6]).to_matrix();
-        let worst = est
-            .iter()
-            .map(|pose| rotation_error_deg(&pose.to_matrix(), &ident))
-            .fold(0.0, f64::max);
+        let worst = worst_degrees_after_refining(strips(7, 0.02), 0.04);
         assert!(worst < 0.3, "{worst} deg");
     }
 
@@ -502,26 +506,9 @@ mod tests {
         for p in c.iter_mut().filter(|p| (0.0..0.3).contains(&p[1])) {
             p[2] += 0.03;
         }
-        let clouds = [a, b, c].map(RefineCloud::new);
-        let spacing = clouds[0].spacing;
+        let spacing = RefineCloud::new(a.clone()).spacing;
         assert!((0.005..0.012).contains(&spacing), "spacing {spacing}");
-        let ring = crate::graph::ViewGraph::ring(3).unwrap();
-        let (pool, start) = (two_threads(), misaligned_start());
-        let clouds: Vec<&RefineCloud> = clouds.iter().collect();
-        let est = refine_poses(
-            &clouds,
-            ring.edges(),
-            start.to_vec(),
-            0.04,
-            40,
-            &pool,
-            &|| false,
-        );
-        let ident = Rigid::from_individual(&[0.0; 6]).to_matrix();
-        let worst = est
-            .iter()
-            .map(|pose| rotation_error_deg(&pose.to_matrix(), &ident))
-            .fold(0.0, f64::max);
+        let worst = worst_degrees_after_refining([a, b, c], 0.04);
         assert!(worst < 0.05, "{worst} deg");
     }
 
