@@ -263,29 +263,76 @@ impl PointCloud {
         if count == 0 {
             return Some(Vec::new());
         }
-        // Structure of arrays so the distance update vectorises.
-        let xs: Vec<f64> = self.points.iter().map(|p| p[0]).collect();
-        let ys: Vec<f64> = self.points.iter().map(|p| p[1]).collect();
-        let zs: Vec<f64> = self.points.iter().map(|p| p[2]).collect();
+        // The points in blocks of nearby points (Morton order), each with its bounding box
+        // and the largest of its points' distances to the chosen set. A pick changes only the
+        // blocks whose box is closer to it than that largest distance: late picks touch a few
+        // blocks instead of every point. The distances and the picks are exactly those of the
+        // plain algorithm (the box's distance is computed with the same monotone operations,
+        // so it never exceeds a point's).
+        let order = morton_order(&self.points);
+        let xs: Vec<f64> = order.iter().map(|&i| self.points[i][0]).collect();
+        let ys: Vec<f64> = order.iter().map(|&i| self.points[i][1]).collect();
+        let zs: Vec<f64> = order.iter().map(|&i| self.points[i][2]).collect();
+        let blocks: Vec<FpsBlock> = (0..n)
+            .step_by(FPS_BLOCK)
+            .map(|s| {
+                let e = (s + FPS_BLOCK).min(n);
+                let (lo, hi) = bounds(&(s..e).map(|i| [xs[i], ys[i], zs[i]]).collect::<Vec<_>>());
+                FpsBlock {
+                    lo,
+                    hi,
+                    far: f64::INFINITY,
+                    far_index: order[s..e].iter().copied().min().unwrap_or(0),
+                }
+            })
+            .collect();
+        let mut blocks = blocks;
         let mut nearest = vec![f64::INFINITY; n];
         let mut chosen = Vec::with_capacity(count);
+        // Ties go to the lowest index of the input, as in one pass over it.
         let mut current = 0usize;
         for pick in 0..count {
             if pick % 256 == 255 && stop() {
                 return None;
             }
             chosen.push(current);
-            let (cx, cy, cz) = (xs[current], ys[current], zs[current]);
-            // Three branch-free passes (update, max, first index of the max) vectorise;
-            // one fused loop with a branch does not.
-            for i in 0..n {
-                let dx = xs[i] - cx;
-                let dy = ys[i] - cy;
-                let dz = zs[i] - cz;
-                nearest[i] = (dx * dx + dy * dy + dz * dz).min(nearest[i]);
+            let c = self.points[current];
+            for (b, block) in blocks.iter_mut().enumerate() {
+                let mut bound = 0.0;
+                for k in 0..3 {
+                    let d = (block.lo[k] - c[k]).max(0.0).max(c[k] - block.hi[k]);
+                    bound += d * d;
+                }
+                if bound >= block.far {
+                    continue;
+                }
+                let (s, e) = (b * FPS_BLOCK, ((b + 1) * FPS_BLOCK).min(n));
+                for i in s..e {
+                    let dx = xs[i] - c[0];
+                    let dy = ys[i] - c[1];
+                    let dz = zs[i] - c[2];
+                    nearest[i] = (dx * dx + dy * dy + dz * dz).min(nearest[i]);
+                }
+                block.far = nearest[s..e]
+                    .iter()
+                    .copied()
+                    .fold(f64::NEG_INFINITY, f64::max);
+                block.far_index = (s..e)
+                    .filter(|&i| nearest[i] == block.far)
+                    .map(|i| order[i])
+                    .min()
+                    .unwrap_or(usize::MAX);
             }
-            let far = nearest.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-            current = nearest.iter().position(|&d| d == far).unwrap_or(0);
+            let far = blocks
+                .iter()
+                .map(|b| b.far)
+                .fold(f64::NEG_INFINITY, f64::max);
+            current = blocks
+                .iter()
+                .filter(|b| b.far == far)
+                .map(|b| b.far_index)
+                .min()
+                .unwrap_or(0);
         }
         Some(chosen)
     }
@@ -409,6 +456,47 @@ impl PointCloud {
 /// times the median (see [`PointCloud::without_strays`]).
 pub const STRAY_FACTOR: f64 = 10.0;
 
+/// Points per block of farthest-point sampling.
+const FPS_BLOCK: usize = 64;
+
+/// A block of farthest-point sampling: its box, and its largest distance to the chosen set
+/// with the lowest input index at that distance.
+struct FpsBlock {
+    lo: [f64; 3],
+    hi: [f64; 3],
+    far: f64,
+    far_index: usize,
+}
+
+/// Indices of `points` along a Morton (Z-order) curve of their bounding box, so that
+/// consecutive points are near each other; ties in the curve's key are broken by the
+/// coordinates, so the order depends only on the points.
+pub(crate) fn morton_order(points: &[[f64; 3]]) -> Vec<usize> {
+    let (lo, hi) = bounds(points);
+    let ext = (0..3)
+        .map(|k| hi[k] - lo[k])
+        .fold(0.0, f64::max)
+        .max(f64::MIN_POSITIVE);
+    let scale = 1023.0 / ext;
+    let spread = |mut v: u64| {
+        v &= 0x3ff;
+        v = (v | (v << 16)) & 0x0300_00ff;
+        v = (v | (v << 8)) & 0x0300_f00f;
+        v = (v | (v << 4)) & 0x030c_30c3;
+        (v | (v << 2)) & 0x0924_9249
+    };
+    let key = |p: &[f64; 3]| {
+        let q: [u64; 3] = std::array::from_fn(|k| ((p[k] - lo[k]) * scale) as u64);
+        spread(q[0]) | (spread(q[1]) << 1) | (spread(q[2]) << 2)
+    };
+    let mut order: Vec<usize> = (0..points.len()).collect();
+    order.sort_by_cached_key(|&i| {
+        let p = &points[i];
+        (key(p), p[0].to_bits(), p[1].to_bits(), p[2].to_bits(), i)
+    });
+    order
+}
+
 /// Axis-aligned bounds `(min, max)` of points; both are zero for no points.
 pub fn bounds(points: &[[f64; 3]]) -> ([f64; 3], [f64; 3]) {
     if points.is_empty() {
@@ -450,6 +538,50 @@ mod tests {
                 })
                 .collect(),
         )
+    }
+
+    /// Farthest-point sampling in its plain form: every pick updates every point.
+    fn plain_farthest_point_indices(points: &[[f64; 3]], count: usize) -> Vec<usize> {
+        let mut nearest = vec![f64::INFINITY; points.len()];
+        let mut chosen = Vec::new();
+        let mut current = 0;
+        for _ in 0..count.min(points.len()) {
+            chosen.push(current);
+            let c = points[current];
+            for (d, p) in nearest.iter_mut().zip(points) {
+                let (dx, dy, dz) = (p[0] - c[0], p[1] - c[1], p[2] - c[2]);
+                *d = (dx * dx + dy * dy + dz * dz).min(*d);
+            }
+            let far = nearest.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            current = nearest.iter().position(|&d| d == far).unwrap();
+        }
+        chosen
+    }
+
+    #[test]
+    fn blocked_farthest_point_sampling_picks_exactly_what_the_plain_one_picks() {
+        // Random points, a grid (many equal distances: ties) with repeated points, a line.
+        let grid: Vec<[f64; 3]> = (0..1500)
+            .map(|i| {
+                [
+                    (i % 10) as f64,
+                    ((i / 10) % 10) as f64,
+                    (i / 100 % 10) as f64,
+                ]
+            })
+            .collect();
+        let line: Vec<[f64; 3]> = (0..700).map(|i| [i as f64 * 0.1, 1.0, 2.0]).collect();
+        for points in [random_cloud(3000, 7).points().to_vec(), grid, line] {
+            let c = PointCloud::new(points.clone());
+            for count in [1, 2, 50, 400, points.len()] {
+                assert_eq!(
+                    c.farthest_point_indices(count),
+                    plain_farthest_point_indices(&points, count),
+                    "{count} of {}",
+                    points.len()
+                );
+            }
+        }
     }
 
     #[test]

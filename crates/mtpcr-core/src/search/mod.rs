@@ -228,29 +228,11 @@ fn sum_chunked(
 }
 
 /// Sorts points along a Morton (Z-order) curve so that consecutive queries touch nearby cells.
-fn morton_sorted(mut points: Vec<[f64; 3]>) -> Vec<[f64; 3]> {
-    if points.len() < 2 {
-        return points;
-    }
-    let (lo, hi) = crate::cloud::bounds(&points);
-    let ext = (0..3)
-        .map(|k| hi[k] - lo[k])
-        .fold(0.0, f64::max)
-        .max(f64::MIN_POSITIVE);
-    let scale = 1023.0 / ext;
-    let spread = |mut v: u64| {
-        v &= 0x3ff;
-        v = (v | (v << 16)) & 0x0300_00ff;
-        v = (v | (v << 8)) & 0x0300_f00f;
-        v = (v | (v << 4)) & 0x030c_30c3;
-        (v | (v << 2)) & 0x0924_9249
-    };
-    let key = |p: &[f64; 3]| {
-        let q: [u64; 3] = std::array::from_fn(|k| ((p[k] - lo[k]) * scale) as u64);
-        spread(q[0]) | (spread(q[1]) << 1) | (spread(q[2]) << 2)
-    };
-    points.sort_by_cached_key(|p| (key(p), p[0].to_bits(), p[1].to_bits(), p[2].to_bits()));
-    points
+fn morton_sorted(points: Vec<[f64; 3]>) -> Vec<[f64; 3]> {
+    crate::cloud::morton_order(&points)
+        .into_iter()
+        .map(|i| points[i])
+        .collect()
 }
 
 #[cfg(test)]
