@@ -273,7 +273,7 @@ impl PointCloud {
         let xs: Vec<f64> = order.iter().map(|&i| self.points[i][0]).collect();
         let ys: Vec<f64> = order.iter().map(|&i| self.points[i][1]).collect();
         let zs: Vec<f64> = order.iter().map(|&i| self.points[i][2]).collect();
-        let blocks: Vec<FpsBlock> = (0..n)
+        let mut blocks: Vec<FpsBlock> = (0..n)
             .step_by(FPS_BLOCK)
             .map(|s| {
                 let e = (s + FPS_BLOCK).min(n);
@@ -286,7 +286,6 @@ impl PointCloud {
                 }
             })
             .collect();
-        let mut blocks = blocks;
         let mut nearest = vec![f64::INFINITY; n];
         let mut chosen = Vec::with_capacity(count);
         // Ties go to the lowest index of the input, as in one pass over it.
@@ -299,8 +298,8 @@ impl PointCloud {
             let c = self.points[current];
             for (b, block) in blocks.iter_mut().enumerate() {
                 let mut bound = 0.0;
-                for k in 0..3 {
-                    let d = (block.lo[k] - c[k]).max(0.0).max(c[k] - block.hi[k]);
+                for ((&lo, &hi), &ck) in block.lo.iter().zip(&block.hi).zip(&c) {
+                    let d = (lo - ck).max(0.0).max(ck - hi);
                     bound += d * d;
                 }
                 if bound >= block.far {
