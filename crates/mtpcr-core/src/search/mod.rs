@@ -184,7 +184,7 @@ fn dist2(a: &[f64; 3], b: &[f64; 3]) -> f64 {
 }
 
 /// Points between two checks of an early exit.
-const CHUNK: usize = 64;
+pub(super) const CHUNK: usize = 64;
 
 /// Counts the points that pass `hit`; gives up (`None`) once `needed` is out of reach.
 #[inline(always)]
