@@ -13,6 +13,8 @@ const MAX_FIELD_NODES: usize = 1 << 22;
 
 /// Every this many nodes per axis, the build queries a coarse node first (see `build`).
 const COARSE: usize = 4;
+/// Nodes per axis of the blocks the build fills together (see `build`).
+const BLOCK: usize = 2;
 
 /// Capped distance to the nearest point, sampled at grid nodes and interpolated.
 #[derive(Clone, Debug)]
@@ -25,8 +27,10 @@ pub struct DistanceField {
 }
 
 impl DistanceField {
-    /// The field of the points in `tree` (bounds `lo`, `hi`), nodes `spacing` apart, capped at `cap`.
+    /// The field of `points` (indexed by `tree`, bounds `lo`, `hi`), nodes `spacing` apart,
+    /// capped at `cap`.
     pub fn build(
+        points: &[[f64; 3]],
         tree: &ImmutableKdTree<f64, 3>,
         lo: [f64; 3],
         hi: [f64; 3],
@@ -70,31 +74,75 @@ impl DistanceField {
         let far_enough = cap * (1.0 + 1e-9) + 1e-12;
         // The coarse node nearest to fine index `i` on an axis of `coarse_n` coarse nodes.
         let round = |i: usize, coarse_n: usize| ((i + COARSE / 2) / COARSE).min(coarse_n - 1);
-        let values: Vec<f32> = (0..frame.len())
-            .into_par_iter()
-            .with_min_len(4096)
-            .map(|c| {
-                let i = c % nx;
-                let j = (c / nx) % ny;
-                let k = c / (nx * ny);
-                let (a, b, d) = (
-                    round(i, coarse_dims[0]),
-                    round(j, coarse_dims[1]),
-                    round(k, coarse_dims[2]),
-                );
-                let offset = [
-                    i.abs_diff(a * COARSE),
-                    j.abs_diff(b * COARSE),
-                    k.abs_diff(d * COARSE),
-                ];
-                let apart = h * ((offset.iter().map(|o| o * o).sum::<usize>()) as f64).sqrt();
-                let lower_bound = coarse[a + coarse_dims[0] * (b + coarse_dims[1] * d)] - apart;
-                if lower_bound >= far_enough {
-                    return cap as f32;
+        let beyond_cap = |i: usize, j: usize, k: usize| {
+            let (a, b, d) = (
+                round(i, coarse_dims[0]),
+                round(j, coarse_dims[1]),
+                round(k, coarse_dims[2]),
+            );
+            let offset = [
+                i.abs_diff(a * COARSE),
+                j.abs_diff(b * COARSE),
+                k.abs_diff(d * COARSE),
+            ];
+            let apart = h * ((offset.iter().map(|o| o * o).sum::<usize>()) as f64).sqrt();
+            coarse[a + coarse_dims[0] * (b + coarse_dims[1] * d)] - apart >= far_enough
+        };
+        // The other nodes in blocks of BLOCK^3: one query at the block's centre bounds where
+        // the nearest point of every node of the block can be (within the centre's distance
+        // plus twice the block's half-diagonal, and within the cap plus one half-diagonal
+        // for a value below the cap); the nodes then take the minimum over those points,
+        // computed as the KD-tree computes it, so every value is the same as a query's.
+        let half_diagonal = h * (BLOCK - 1) as f64 * 3f64.sqrt() / 2.0;
+        let mut values = vec![cap as f32; frame.len()];
+        values
+            .par_chunks_mut(nx * ny * BLOCK)
+            .enumerate()
+            .for_each(|(slab, out)| {
+                let k0 = slab * BLOCK;
+                let mut near: Vec<[f64; 3]> = Vec::new();
+                let mut open: Vec<(usize, usize, usize)> = Vec::with_capacity(BLOCK.pow(3));
+                for j0 in (0..ny).step_by(BLOCK) {
+                    for i0 in (0..nx).step_by(BLOCK) {
+                        open.clear();
+                        for k in k0..(k0 + BLOCK).min(nz) {
+                            for j in j0..(j0 + BLOCK).min(ny) {
+                                for i in i0..(i0 + BLOCK).min(nx) {
+                                    if !beyond_cap(i, j, k) {
+                                        open.push((i, j, k));
+                                    }
+                                }
+                            }
+                        }
+                        if open.is_empty() {
+                            continue;
+                        }
+                        let corner = node(i0, j0, k0);
+                        let centre = corner.map(|v| v + h * (BLOCK - 1) as f64 / 2.0);
+                        let reach = (nearest(&centre) + 2.0 * half_diagonal)
+                            .min(cap + half_diagonal)
+                            * (1.0 + 1e-9)
+                            + 1e-12;
+                        near.clear();
+                        near.extend(
+                            tree.query(&centre)
+                                .within::<SquaredEuclidean<f64>>(reach * reach)
+                                .unsorted()
+                                .execute()
+                                .iter()
+                                .map(|r| points[r.item as usize]),
+                        );
+                        for &(i, j, k) in &open {
+                            let q = node(i, j, k);
+                            let d2 = near.iter().fold(f64::INFINITY, |best, p| {
+                                let (dx, dy, dz) = (q[0] - p[0], q[1] - p[1], q[2] - p[2]);
+                                best.min(dx * dx + dy * dy + dz * dz)
+                            });
+                            out[i + nx * (j + ny * (k - k0))] = d2.sqrt().min(cap) as f32;
+                        }
+                    }
                 }
-                nearest(&node(i, j, k)).min(cap) as f32
-            })
-            .collect();
+            });
         let last_f = std::array::from_fn(|k| (frame.dims[k] - 1) as f64);
         DistanceField {
             frame,
@@ -172,7 +220,8 @@ mod tests {
         for (seed, cap) in [(1, 0.05), (2, 0.2), (3, 0.6)] {
             let points = sheet(seed);
             let tree = ImmutableKdTree::<f64, 3>::new_from_slice(&points).unwrap();
-            let field = DistanceField::build(&tree, [0.0, 0.0, -0.1], [1.0, 0.6, 0.1], 0.02, cap);
+            let field =
+                DistanceField::build(&points, &tree, [0.0, 0.0, -0.1], [1.0, 0.6, 0.1], 0.02, cap);
             let [nx, ny, _] = field.frame.dims;
             let h = field.frame.cell;
             let mut at_cap = 0;

@@ -121,7 +121,8 @@ impl IndexedCloud {
             SearchMethod::Fast => {
                 let (lo, hi) = crate::cloud::bounds(&points);
                 let grid = InlierGrid::build(&points, lo, hi, eps);
-                let field = DistanceField::build(kd.tree(), lo, hi, eps * FIELD_NODE_PER_EPS, cap);
+                let field =
+                    DistanceField::build(&points, kd.tree(), lo, hi, eps * FIELD_NODE_PER_EPS, cap);
                 IndexedCloud {
                     points,
                     inlier: Arc::new(grid),
@@ -266,7 +267,7 @@ pub(crate) mod tests {
     const DISTANCE_INDEXES: &[(&str, MakeDistance)] = &[("field", |p, eps, cap| {
         let (lo, hi) = crate::cloud::bounds(p);
         let kd = KdTreeIndex::new(p, eps, cap);
-        Arc::new(DistanceField::build(kd.tree(), lo, hi, 2.0 * eps, cap))
+        Arc::new(DistanceField::build(p, kd.tree(), lo, hi, 2.0 * eps, cap))
     })];
 
     #[test]
