@@ -177,12 +177,13 @@ impl DistanceIndex for DistanceField {
         {
             return self.cap;
         }
-        let (i, j, k) = (fx as usize, fy as usize, fz as usize);
+        // In range here, so the 32-bit truncation is floor (and cheaper than to usize).
+        let (i, j, k) = (fx as i32, fy as i32, fz as i32);
         let (u, v, w) = (fx - i as f64, fy - j as f64, fz - k as f64);
         let sx = 1;
         let sy = f.dims[0];
         let sz = f.dims[0] * f.dims[1];
-        let b = f.linear(i, j, k);
+        let b = f.linear(i as usize, j as usize, k as usize);
         let g = |o: usize| self.values[b + o] as f64;
         let c00 = g(0) + (g(sx) - g(0)) * u;
         let c10 = g(sy) + (g(sy + sx) - g(sy)) * u;

@@ -219,8 +219,8 @@ impl InlierGrid {
         {
             return None;
         }
-        // g >= 0, so truncation is floor.
-        Some(g.map(|v| v as usize))
+        // 0 <= g < 2^31, so truncation is floor (and cheaper to i32 than to usize).
+        Some(g.map(|v| v as i32 as usize))
     }
 
     /// The cell of sub-cell `s` and its word in `occupied`; the clear bit past the grid for
