@@ -8,6 +8,7 @@
 use super::grid_frame::GridFrame;
 use super::{dist2, InlierIndex, CHUNK};
 use crate::se3::Rigid;
+use rayon::prelude::*;
 
 /// Upper bound on cells of the inlier grid (32 MB of cell table per cloud at most).
 const MAX_GRID_CELLS: usize = 1 << 23;
@@ -116,21 +117,26 @@ impl InlierGrid {
             }
         }
         pairs.sort_unstable();
-        let mut mixed = Vec::new();
-        let mut candidates = Vec::new();
-        let hs = h / SUB as f64;
+        // The mixed cells: each cell's run of pairs, then its sub-cell masks (most of the
+        // build's work, independent per cell, so in parallel; collected in cell order).
+        let mut runs: Vec<(usize, usize)> = Vec::new();
         let mut g = 0;
         while g < pairs.len() {
-            let c = pairs[g].0;
             let mut e = g;
-            while e < pairs.len() && pairs[e].0 == c {
+            while e < pairs.len() && pairs[e].0 == pairs[g].0 {
                 e += 1;
             }
-            if cells[c as usize] != FULL {
-                cells[c as usize] = 2 + mixed.len() as u32;
-                let first = candidates.len();
-                candidates.extend(pairs[g..e].iter().map(|&(_, pi)| points[pi as usize]));
-                let cu = c as usize;
+            if cells[pairs[g].0 as usize] != FULL {
+                runs.push((g, e));
+            }
+            g = e;
+        }
+        let hs = h / SUB as f64;
+        let masks: Vec<(u64, u64)> = runs
+            .par_iter()
+            .with_min_len(64)
+            .map(|&(g, e)| {
+                let cu = pairs[g].0 as usize;
                 let cell_idx = [
                     cu % frame.dims[0],
                     (cu / frame.dims[0]) % frame.dims[1],
@@ -143,8 +149,8 @@ impl InlierGrid {
                         frame.origin[a] + cell_idx[a] as f64 * h + sub[a] as f64 * hs
                     });
                     let mut any_near = false;
-                    for q in &candidates[first..] {
-                        let (dmin, dmax) = box_distances2(q, b0, hs);
+                    for &(_, pi) in &pairs[g..e] {
+                        let (dmin, dmax) = box_distances2(&points[pi as usize], b0, hs);
                         if dmax <= full_below {
                             full |= 1 << bit;
                         }
@@ -154,14 +160,21 @@ impl InlierGrid {
                         empty |= 1 << bit;
                     }
                 }
-                mixed.push(MixedCell {
-                    full,
-                    empty,
-                    start: first as u32,
-                    end: candidates.len() as u32,
-                });
-            }
-            g = e;
+                (full, empty)
+            })
+            .collect();
+        let mut mixed = Vec::with_capacity(runs.len());
+        let mut candidates = Vec::new();
+        for (&(g, e), &(full, empty)) in runs.iter().zip(&masks) {
+            cells[pairs[g].0 as usize] = 2 + mixed.len() as u32;
+            let first = candidates.len();
+            candidates.extend(pairs[g..e].iter().map(|&(_, pi)| points[pi as usize]));
+            mixed.push(MixedCell {
+                full,
+                empty,
+                start: first as u32,
+                end: candidates.len() as u32,
+            });
         }
         let words = (cells.len() + 1).div_ceil(WORD);
         let mut occupied = vec![0u64; words];
