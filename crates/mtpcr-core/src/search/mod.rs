@@ -294,6 +294,42 @@ pub(crate) mod tests {
     }
 
     #[test]
+    fn inlier_counts_of_moved_points_equal_the_kd_tree_at_any_length() {
+        // Batched counting works in stages of points: lengths around the stage sizes.
+        let pts = surface_points(3000, 12);
+        let queries = surface_points(1100, 13);
+        let eps = 0.03;
+        let exact = KdTreeIndex::new(&pts, eps, 0.2);
+        let mut rng = ChaCha8Rng::seed_from_u64(14);
+        // Half near the identity (many inliers), half anywhere.
+        let moves: Vec<Rigid> = (0..6)
+            .map(|k| {
+                if k % 2 == 0 {
+                    let angles: [f64; 3] = std::array::from_fn(|_| rng.random_range(-2.0..2.0));
+                    let shift: [f64; 3] = std::array::from_fn(|_| rng.random_range(-0.02..0.02));
+                    Rigid::from_individual(&[
+                        angles[0], angles[1], angles[2], shift[0], shift[1], shift[2],
+                    ])
+                } else {
+                    Rigid::from_matrix(&crate::se3::random_rigid(&mut rng, 1.0))
+                }
+            })
+            .collect();
+        for (name, make) in INLIER_INDEXES {
+            let index = make(&pts, eps);
+            let mut hits = 0;
+            for t in &moves {
+                for n in [1, 15, 16, 17, 63, 64, 65, 1001, 1100] {
+                    let got = index.count_within(&queries[..n], t, 0);
+                    assert_eq!(got, exact.count_within(&queries[..n], t, 0), "{name} {n}");
+                    hits += got.unwrap_or(0);
+                }
+            }
+            assert!(hits > 1000, "the test must exercise inliers ({hits})");
+        }
+    }
+
+    #[test]
     fn inlier_indexes_agree_on_cell_boundaries_and_the_points_themselves() {
         let pts = surface_points(500, 3);
         let exact = KdTreeIndex::new(&pts, 0.05, 0.2);
