@@ -353,17 +353,27 @@ fn refine(
         pose = kabsch(fitted.iter().map(|&k| (&matched.src[k], &matched.tgt[k])))?;
     }
     // (source keypoint, nearest target keypoint, squared distance) within sqrt(d2), normals
-    // agreeing.
-    let pairs_within = |pose: &Rigid, d2: f64| -> Vec<(usize, usize, f64)> {
+    // agreeing. `anchors`: where each keypoint was last queried and its distance there; one
+    // that has moved less since than that distance's excess over sqrt(d2) is still beyond
+    // it (triangle inequality) and needs no query.
+    let mut anchors = vec![([0.0; 3], f64::NEG_INFINITY); source.points.len()];
+    let mut pairs_within = |pose: &Rigid, d2: f64| -> Vec<(usize, usize, f64)> {
+        let certainly_beyond = d2.sqrt() * (1.0 + 1e-9);
         source
             .points
             .iter()
+            .zip(&mut anchors)
             .enumerate()
-            .filter_map(|(i, p)| {
+            .filter_map(|(i, (p, anchor))| {
+                let q = pose.apply(p);
+                if anchor.1 - dist2(&q, &anchor.0).sqrt() > certainly_beyond {
+                    return None;
+                }
                 let nn = tree
-                    .query(&pose.apply(p))
+                    .query(&q)
                     .nearest_one::<SquaredEuclidean<f64>>()
                     .execute();
+                *anchor = (q, nn.distance.sqrt());
                 let j = nn.item as usize;
                 let ok = nn.distance <= d2
                     && normals_agree(
