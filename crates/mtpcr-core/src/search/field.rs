@@ -7,7 +7,7 @@ use super::DistanceIndex;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 
-/// Upper bound on nodes of the distance field (16 MB per cloud at most; each node is one
+/// Upper bound on nodes of the distance field (32 MB per cloud at most; each node is one
 /// KD-tree query at build time).
 const MAX_FIELD_NODES: usize = 1 << 22;
 
@@ -22,7 +22,9 @@ pub struct DistanceField {
     frame: GridFrame,
     /// Highest valid lower-corner index per axis, as f64 (`dims - 1`).
     last_f: [f64; 3],
-    values: Vec<f32>,
+    /// Node values, rounded to f32 (the precision they were tested at) and stored as f64
+    /// so that the lookup reads them without converting.
+    values: Vec<f64>,
     cap: f64,
 }
 
@@ -147,7 +149,7 @@ impl DistanceField {
         DistanceField {
             frame,
             last_f,
-            values,
+            values: values.into_iter().map(f64::from).collect(),
             cap,
         }
     }
@@ -184,7 +186,7 @@ impl DistanceIndex for DistanceField {
         let sy = f.dims[0];
         let sz = f.dims[0] * f.dims[1];
         let b = f.linear(i as usize, j as usize, k as usize);
-        let g = |o: usize| self.values[b + o] as f64;
+        let g = |o: usize| self.values[b + o];
         let c00 = g(0) + (g(sx) - g(0)) * u;
         let c10 = g(sy) + (g(sy + sx) - g(sy)) * u;
         let c01 = g(sz) + (g(sz + sx) - g(sz)) * u;
@@ -195,7 +197,7 @@ impl DistanceIndex for DistanceField {
     }
 
     fn memory_bytes(&self) -> usize {
-        self.values.len() * 4
+        self.values.len() * 8
     }
 }
 
@@ -239,8 +241,8 @@ mod tests {
                     .execute()
                     .distance
                     .sqrt();
-                assert_eq!(v, d.min(cap) as f32, "node {c} (cap {cap})");
-                at_cap += usize::from(v == cap as f32);
+                assert_eq!(v, d.min(cap) as f32 as f64, "node {c} (cap {cap})");
+                at_cap += usize::from(v == cap as f32 as f64);
             }
             // The test covers nodes beyond the cap (the ones the build may skip).
             assert!(
