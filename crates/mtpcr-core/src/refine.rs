@@ -7,6 +7,7 @@
 
 use crate::graph::Edge;
 use crate::se3::Rigid;
+use crate::search::QueryAnchor;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use nalgebra::{DMatrix, DVector, Matrix3, SMatrix, SVector, Vector3};
 use rayon::prelude::*;
@@ -279,13 +280,11 @@ pub(crate) fn refine_poses(
     };
     // Six unknowns (rotation, translation) per cloud but the first.
     let unknowns = 6 * (poses.len() - 1);
-    // Per direction and source point: where it was last queried in the target's frame and
-    // its distance to the target there. A point that has moved less since then than that
-    // distance's excess over the trim is still beyond the trim (triangle inequality): it
-    // gets no match without a query, exactly as a query would decide.
-    let mut anchors: Vec<Vec<([f64; 3], f64)>> = directions
+    // Per direction and source point: its last query in the target's frame (a point
+    // certainly still beyond the trim gets no match without a query).
+    let mut anchors: Vec<Vec<QueryAnchor>> = directions
         .iter()
-        .map(|&(i, _)| vec![([0.0; 3], f64::NEG_INFINITY); clouds[i].points.len()])
+        .map(|&(i, _)| vec![QueryAnchor::NONE; clouds[i].points.len()])
         .collect();
     for it in 0..iterations {
         if stop() {
@@ -305,8 +304,7 @@ pub(crate) fn refine_poses(
         let mut h = DMatrix::<f64>::zeros(unknowns, unknowns);
         let mut g = DVector::<f64>::zeros(unknowns);
         let mut matched = 0usize;
-        // Beyond this, certainly beyond the trim (a margin far above rounding).
-        let certainly_beyond = max_d2.sqrt() * (1.0 + 1e-9);
+        let trim = max_d2.sqrt();
         for (&(i, j), anchors) in directions.iter().zip(&mut anchors) {
             let to_j = compose(&poses[j].inverse(), &poses[i]);
             let rj = &poses[j].r;
@@ -318,11 +316,7 @@ pub(crate) fn refine_poses(
                     .with_min_len(256)
                     .map(|(p, anchor)| {
                         let q = to_j.apply(p);
-                        let a = anchor.0;
-                        let moved =
-                            ((q[0] - a[0]).powi(2) + (q[1] - a[1]).powi(2) + (q[2] - a[2]).powi(2))
-                                .sqrt();
-                        if anchor.1 - moved > certainly_beyond {
+                        if anchor.still_beyond(&q, trim) {
                             return None;
                         }
                         let nn = clouds[j]
@@ -330,7 +324,7 @@ pub(crate) fn refine_poses(
                             .query(&q)
                             .nearest_one::<SquaredEuclidean<f64>>()
                             .execute();
-                        *anchor = (q, nn.distance.sqrt());
+                        anchor.set(q, nn.distance.sqrt());
                         (nn.distance <= max_d2).then(|| {
                             let m = nn.item as usize;
                             let n = clouds[j].normals[m];

@@ -4,6 +4,7 @@
 use super::{Candidate, Descriptor, FeatureConfig, Features, Matching};
 use super::{DESCRIPTOR_LEN, MIN_MUTUAL_MATCHES};
 use crate::se3::Rigid;
+use crate::search::QueryAnchor;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
 use rand::{RngExt, SeedableRng};
@@ -353,12 +354,9 @@ fn refine(
         pose = kabsch(fitted.iter().map(|&k| (&matched.src[k], &matched.tgt[k])))?;
     }
     // (source keypoint, nearest target keypoint, squared distance) within sqrt(d2), normals
-    // agreeing. `anchors`: where each keypoint was last queried and its distance there; one
-    // that has moved less since than that distance's excess over sqrt(d2) is still beyond
-    // it (triangle inequality) and needs no query.
-    let mut anchors = vec![([0.0; 3], f64::NEG_INFINITY); source.points.len()];
+    // agreeing. A keypoint certainly still beyond sqrt(d2) since its last query needs none.
+    let mut anchors = vec![QueryAnchor::NONE; source.points.len()];
     let mut pairs_within = |pose: &Rigid, d2: f64| -> Vec<(usize, usize, f64)> {
-        let certainly_beyond = d2.sqrt() * (1.0 + 1e-9);
         source
             .points
             .iter()
@@ -366,14 +364,14 @@ fn refine(
             .enumerate()
             .filter_map(|(i, (p, anchor))| {
                 let q = pose.apply(p);
-                if anchor.1 - dist2(&q, &anchor.0).sqrt() > certainly_beyond {
+                if anchor.still_beyond(&q, d2.sqrt()) {
                     return None;
                 }
                 let nn = tree
                     .query(&q)
                     .nearest_one::<SquaredEuclidean<f64>>()
                     .execute();
-                *anchor = (q, nn.distance.sqrt());
+                anchor.set(q, nn.distance.sqrt());
                 let j = nn.item as usize;
                 let ok = nn.distance <= d2
                     && normals_agree(

@@ -176,6 +176,36 @@ impl IndexedCloud {
     }
 }
 
+/// Where a point was last queried against a cloud and its nearest distance there. A point
+/// that has since moved less than that distance's excess over a radius is still beyond the
+/// radius (triangle inequality): the ICPs skip its query, deciding exactly as the query would.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct QueryAnchor {
+    at: [f64; 3],
+    distance: f64,
+}
+
+impl QueryAnchor {
+    /// Not queried yet: never certainly beyond.
+    pub(crate) const NONE: QueryAnchor = QueryAnchor {
+        at: [0.0; 3],
+        distance: f64::NEG_INFINITY,
+    };
+
+    /// Is a point now at `q` certainly farther than `radius` from the cloud? (A relative
+    /// margin of 1e-9, far above rounding, keeps "certainly" true.)
+    #[inline(always)]
+    pub(crate) fn still_beyond(&self, q: &[f64; 3], radius: f64) -> bool {
+        self.distance - dist2(q, &self.at).sqrt() > radius * (1.0 + 1e-9)
+    }
+
+    /// Records a query at `q` whose nearest point was `distance` away.
+    #[inline(always)]
+    pub(crate) fn set(&mut self, q: [f64; 3], distance: f64) {
+        *self = QueryAnchor { at: q, distance };
+    }
+}
+
 #[inline(always)]
 fn dist2(a: &[f64; 3], b: &[f64; 3]) -> f64 {
     let dx = a[0] - b[0];
