@@ -288,10 +288,16 @@ pub(crate) mod tests {
     type MakeDistance = fn(&[[f64; 3]], f64, f64) -> Arc<dyn DistanceIndex>;
 
     /// Every inlier index, checked against the KD-tree (add a new structure here).
-    const INLIER_INDEXES: &[(&str, MakeInlier)] = &[("grid", |p, eps| {
-        let (lo, hi) = crate::cloud::bounds(p);
-        Arc::new(InlierGrid::build(p, lo, hi, eps))
-    })];
+    const INLIER_INDEXES: &[(&str, MakeInlier)] = &[
+        ("grid", |p, eps| {
+            let (lo, hi) = crate::cloud::bounds(p);
+            Arc::new(InlierGrid::build(p, lo, hi, eps))
+        }),
+        ("grid without AVX2", |p, eps| {
+            let (lo, hi) = crate::cloud::bounds(p);
+            Arc::new(grid::PortableInlierGrid(InlierGrid::build(p, lo, hi, eps)))
+        }),
+    ];
 
     /// Every distance index, checked against the KD-tree within its error bound.
     const DISTANCE_INDEXES: &[(&str, MakeDistance)] = &[("field", |p, eps, cap| {
