@@ -3,7 +3,11 @@
 //! 1-Lipschitz, so the interpolation is within one node diagonal of the exact value.
 
 use super::grid_frame::GridFrame;
-use super::DistanceIndex;
+#[cfg(target_arch = "x86_64")]
+use super::lanes::avx2_detected;
+use super::lanes::floor_in_range;
+use super::{DistanceIndex, CHUNK};
+use crate::se3::Rigid;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 
@@ -155,6 +159,102 @@ impl DistanceField {
     }
 }
 
+impl DistanceField {
+    /// `sum_capped_distance` in code that vectorizes (see `lanes`): per chunk of points,
+    /// their values as `capped_distance` gives them, then added in order.
+    #[inline(always)]
+    fn sum_capped_distance_portable(
+        &self,
+        points: &[[f64; 3]],
+        t: &Rigid,
+        start: f64,
+        divisor: f64,
+        limit: f64,
+    ) -> Option<f64> {
+        let mut sum = start;
+        let mut values = [0.0; CHUNK];
+        for chunk in points.chunks(CHUNK) {
+            let values = &mut values[..chunk.len()];
+            self.capped_distances(chunk, t, values);
+            for v in values.iter() {
+                sum += v;
+            }
+            if sum / divisor >= limit {
+                return None;
+            }
+        }
+        Some(sum)
+    }
+
+    /// `capped_distance(t.apply(p))` of each of at most CHUNK points into `out`, without
+    /// branches in the locating loop.
+    #[inline(always)]
+    fn capped_distances(&self, points: &[[f64; 3]], t: &Rigid, out: &mut [f64]) {
+        let f = &self.frame;
+        let (d0, d1) = (f.dims[0] as u32, f.dims[1] as u32);
+        let mut base = [0u32; CHUNK];
+        let mut weights = [[0.0; 3]; CHUNK];
+        let mut inside = [false; CHUNK];
+        for (((p, base), weights), inside) in points
+            .iter()
+            .zip(&mut base)
+            .zip(&mut weights)
+            .zip(&mut inside)
+        {
+            let p = t.apply(p);
+            let g: [f64; 3] = std::array::from_fn(|k| (p[k] - f.origin[k]) * f.inv_cell);
+            // The negated form is also false for NaN.
+            *inside = g[0] >= 0.0
+                && g[1] >= 0.0
+                && g[2] >= 0.0
+                && g[0] < self.last_f[0]
+                && g[1] < self.last_f[1]
+                && g[2] < self.last_f[2];
+            let [i, j, k] = g.map(floor_in_range);
+            *weights = [g[0] - i as f64, g[1] - j as f64, g[2] - k as f64];
+            let b = i.wrapping_add(d0.wrapping_mul(j.wrapping_add(d1.wrapping_mul(k))));
+            *base = if *inside { b } else { 0 };
+        }
+        for (((out, &b), &[u, v, w]), &inside) in out.iter_mut().zip(&base).zip(&weights).zip(&inside)
+        {
+            let value = self.interpolate(b as usize, u, v, w);
+            *out = if inside { value } else { self.cap };
+        }
+    }
+
+    /// The trilinear interpolation in the cell whose lowest node is `b`, at weights `u, v, w`.
+    #[inline(always)]
+    fn interpolate(&self, b: usize, u: f64, v: f64, w: f64) -> f64 {
+        let f = &self.frame;
+        let sx = 1;
+        let sy = f.dims[0];
+        let sz = f.dims[0] * f.dims[1];
+        let g = |o: usize| self.values[b + o];
+        let c00 = g(0) + (g(sx) - g(0)) * u;
+        let c10 = g(sy) + (g(sy + sx) - g(sy)) * u;
+        let c01 = g(sz) + (g(sz + sx) - g(sz)) * u;
+        let c11 = g(sz + sy) + (g(sz + sy + sx) - g(sz + sy)) * u;
+        let c0 = c00 + (c10 - c00) * v;
+        let c1 = c01 + (c11 - c01) * v;
+        c0 + (c1 - c0) * w
+    }
+
+    /// `sum_capped_distance_portable` compiled for AVX2 (see `lanes`).
+    #[cfg(target_arch = "x86_64")]
+    #[allow(unsafe_code)]
+    #[target_feature(enable = "avx2,bmi1,bmi2,lzcnt,popcnt")]
+    unsafe fn sum_capped_distance_avx2(
+        &self,
+        points: &[[f64; 3]],
+        t: &Rigid,
+        start: f64,
+        divisor: f64,
+        limit: f64,
+    ) -> Option<f64> {
+        self.sum_capped_distance_portable(points, t, start, divisor, limit)
+    }
+}
+
 impl DistanceIndex for DistanceField {
     fn cap(&self) -> f64 {
         self.cap
@@ -182,22 +282,66 @@ impl DistanceIndex for DistanceField {
         // In range here, so the 32-bit truncation is floor (and cheaper than to usize).
         let (i, j, k) = (fx as i32, fy as i32, fz as i32);
         let (u, v, w) = (fx - i as f64, fy - j as f64, fz - k as f64);
-        let sx = 1;
-        let sy = f.dims[0];
-        let sz = f.dims[0] * f.dims[1];
         let b = f.linear(i as usize, j as usize, k as usize);
-        let g = |o: usize| self.values[b + o];
-        let c00 = g(0) + (g(sx) - g(0)) * u;
-        let c10 = g(sy) + (g(sy + sx) - g(sy)) * u;
-        let c01 = g(sz) + (g(sz + sx) - g(sz)) * u;
-        let c11 = g(sz + sy) + (g(sz + sy + sx) - g(sz + sy)) * u;
-        let c0 = c00 + (c10 - c00) * v;
-        let c1 = c01 + (c11 - c01) * v;
-        c0 + (c1 - c0) * w
+        self.interpolate(b, u, v, w)
+    }
+
+    #[allow(unsafe_code)]
+    fn sum_capped_distance(
+        &self,
+        points: &[[f64; 3]],
+        t: &Rigid,
+        start: f64,
+        divisor: f64,
+        limit: f64,
+    ) -> Option<f64> {
+        #[cfg(target_arch = "x86_64")]
+        if avx2_detected() {
+            // SAFETY: the CPU has every feature `sum_capped_distance_avx2` is compiled for.
+            return unsafe { self.sum_capped_distance_avx2(points, t, start, divisor, limit) };
+        }
+        self.sum_capped_distance_portable(points, t, start, divisor, limit)
     }
 
     fn memory_bytes(&self) -> usize {
         self.values.len() * 8
+    }
+}
+
+/// The field answering through `sum_capped_distance_portable` whatever the CPU, so the
+/// oracle tests (search/mod.rs) check that code too where the AVX2 code runs.
+#[cfg(test)]
+#[derive(Debug)]
+pub(crate) struct PortableDistanceField(pub DistanceField);
+
+#[cfg(test)]
+impl DistanceIndex for PortableDistanceField {
+    fn cap(&self) -> f64 {
+        self.0.cap()
+    }
+
+    fn capped_distance(&self, p: &[f64; 3]) -> f64 {
+        self.0.capped_distance(p)
+    }
+
+    fn error_bound(&self) -> f64 {
+        self.0.error_bound()
+    }
+
+    fn sum_capped_distance(
+        &self,
+        points: &[[f64; 3]],
+        t: &Rigid,
+        start: f64,
+        divisor: f64,
+        limit: f64,
+    ) -> Option<f64> {
+        self.0
+            .sum_capped_distance_portable(points, t, start, divisor, limit)
+    }
+
+    fn memory_bytes(&self) -> usize {
+        self.0.memory_bytes()
     }
 }
 

@@ -6,6 +6,9 @@
 //! land in empty cells.
 
 use super::grid_frame::GridFrame;
+#[cfg(target_arch = "x86_64")]
+use super::lanes::avx2_detected;
+use super::lanes::floor_in_range;
 use super::{dist2, InlierIndex, CHUNK};
 use crate::se3::Rigid;
 use rayon::prelude::*;
@@ -322,24 +325,11 @@ impl InlierGrid {
     }
 }
 
-/// `floor(v)` as u32 for `0 <= v < 2^31`, in operations that vectorize (the saturating
-/// `as` conversion does not); other inputs give unspecified values.
-#[inline(always)]
-fn floor_in_range(v: f64) -> u32 {
-    // Adding 2^52 rounds to the nearest integer and leaves it in the low bits; one less
-    // where that rounded up.
-    const SHIFT: f64 = 4_503_599_627_370_496.0;
-    let shifted = v + SHIFT;
-    let nearest = shifted.to_bits() as u32;
-    nearest.wrapping_sub((shifted - SHIFT > v) as u32)
-}
-
 /// Points whose cells are looked up before any is answered (see `count_within`).
 const STAGE: usize = 16;
 
 impl InlierGrid {
-    /// `count_within` in code that vectorizes when compiled for wider vectors (see
-    /// `count_within_avx2`).
+    /// `count_within` in code that vectorizes (see `lanes`).
     #[inline(always)]
     fn count_within_portable(
         &self,
@@ -389,10 +379,8 @@ impl InlierGrid {
         Some(count)
     }
 
-    /// `count_within_portable` compiled for AVX2 (and the bit instructions of the same
-    /// CPUs), where locating the points runs four to a vector: 1.6-2x the throughput (`cargo
-    /// bench --bench fitness`). The same IEEE operations in the same order (FMA is not
-    /// enabled, and Rust never fuses a multiply and an add), so the same counts.
+    /// `count_within_portable` compiled for AVX2 (see `lanes`), where locating the points
+    /// runs four to a vector: about 2x the throughput (`cargo bench --bench fitness`).
     #[cfg(target_arch = "x86_64")]
     #[allow(unsafe_code)]
     #[target_feature(enable = "avx2,bmi1,bmi2,lzcnt,popcnt")]
@@ -404,16 +392,6 @@ impl InlierGrid {
     ) -> Option<usize> {
         self.count_within_portable(points, t, needed)
     }
-}
-
-/// Whether this CPU runs `InlierGrid::count_within_avx2` (the detection is cached).
-#[cfg(target_arch = "x86_64")]
-fn avx2_detected() -> bool {
-    std::arch::is_x86_feature_detected!("avx2")
-        && std::arch::is_x86_feature_detected!("bmi1")
-        && std::arch::is_x86_feature_detected!("bmi2")
-        && std::arch::is_x86_feature_detected!("lzcnt")
-        && std::arch::is_x86_feature_detected!("popcnt")
 }
 
 impl InlierIndex for InlierGrid {

@@ -19,6 +19,7 @@ mod field;
 mod grid;
 mod grid_frame;
 mod kdtree;
+mod lanes;
 
 pub use field::DistanceField;
 pub use grid::InlierGrid;
@@ -300,11 +301,25 @@ pub(crate) mod tests {
     ];
 
     /// Every distance index, checked against the KD-tree within its error bound.
-    const DISTANCE_INDEXES: &[(&str, MakeDistance)] = &[("field", |p, eps, cap| {
-        let (lo, hi) = crate::cloud::bounds(p);
-        let kd = KdTreeIndex::new(p, eps, cap);
-        Arc::new(DistanceField::build(p, kd.tree(), lo, hi, 2.0 * eps, cap))
-    })];
+    const DISTANCE_INDEXES: &[(&str, MakeDistance)] = &[
+        ("field", |p, eps, cap| {
+            let (lo, hi) = crate::cloud::bounds(p);
+            let kd = KdTreeIndex::new(p, eps, cap);
+            Arc::new(DistanceField::build(p, kd.tree(), lo, hi, 2.0 * eps, cap))
+        }),
+        ("field without AVX2", |p, eps, cap| {
+            let (lo, hi) = crate::cloud::bounds(p);
+            let kd = KdTreeIndex::new(p, eps, cap);
+            Arc::new(field::PortableDistanceField(DistanceField::build(
+                p,
+                kd.tree(),
+                lo,
+                hi,
+                2.0 * eps,
+                cap,
+            )))
+        }),
+    ];
 
     #[test]
     fn inlier_indexes_answer_as_the_kd_tree_on_random_queries() {
@@ -362,6 +377,43 @@ pub(crate) mod tests {
                 }
             }
             assert!(hits > 1000, "the test must exercise inliers ({hits})");
+        }
+    }
+
+    #[test]
+    fn summed_distances_of_moved_points_are_the_single_answers_added_in_order() {
+        // Batched sums work in chunks: lengths around the chunk size, moves near the
+        // identity (values below the cap) and anywhere (mostly outside the index).
+        let pts = surface_points(3000, 15);
+        let queries = surface_points(1100, 16);
+        let (eps, cap) = (0.03, 0.2);
+        let mut rng = ChaCha8Rng::seed_from_u64(17);
+        let moves: Vec<Rigid> = (0..6)
+            .map(|k| {
+                if k % 2 == 0 {
+                    let angles: [f64; 3] = std::array::from_fn(|_| rng.random_range(-0.3..0.3));
+                    Rigid::from_individual(&[angles[0], angles[1], angles[2], 0.01, 0.0, -0.02])
+                } else {
+                    Rigid::from_matrix(&crate::se3::random_rigid(&mut rng, 1.0))
+                }
+            })
+            .collect();
+        for (name, make) in DISTANCE_INDEXES {
+            let index = make(&pts, eps, cap);
+            let mut below_cap = 0;
+            for t in &moves {
+                for n in [1, 63, 64, 65, 1001, 1100] {
+                    let single: Vec<f64> = queries[..n]
+                        .iter()
+                        .map(|p| index.capped_distance(&t.apply(p)))
+                        .collect();
+                    let expected = single.iter().fold(0.5, |sum, v| sum + v);
+                    let got = index.sum_capped_distance(&queries[..n], t, 0.5, 1.0, f64::MAX);
+                    assert_eq!(got, Some(expected), "{name} {n}");
+                    below_cap += single.iter().filter(|&&v| v < cap).count();
+                }
+            }
+            assert!(below_cap > 1000, "the test must exercise values below the cap");
         }
     }
 
