@@ -215,7 +215,8 @@ impl DistanceField {
             let b = i.wrapping_add(d0.wrapping_mul(j.wrapping_add(d1.wrapping_mul(k))));
             *base = if *inside { b } else { 0 };
         }
-        for (((out, &b), &[u, v, w]), &inside) in out.iter_mut().zip(&base).zip(&weights).zip(&inside)
+        for (((out, &b), &[u, v, w]), &inside) in
+            out.iter_mut().zip(&base).zip(&weights).zip(&inside)
         {
             let value = self.interpolate(b as usize, u, v, w);
             *out = if inside { value } else { self.cap };

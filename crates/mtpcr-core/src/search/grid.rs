@@ -263,13 +263,7 @@ impl InlierGrid {
 
     /// `answer` for a cell whose bit in `word` is set.
     #[inline(always)]
-    fn answer_occupied(
-        &self,
-        c: usize,
-        word: u64,
-        sub_bit: u32,
-        p: impl Fn() -> [f64; 3],
-    ) -> bool {
+    fn answer_occupied(&self, c: usize, word: u64, sub_bit: u32, p: impl Fn() -> [f64; 3]) -> bool {
         let before = (word & ((1u64 << (c % WORD)) - 1)).count_ones() as usize;
         let cell = &self.records[self.rank[c / WORD] as usize + before];
         let bit = 1u64 << sub_bit;
@@ -305,12 +299,8 @@ impl InlierGrid {
             let g: [f64; 3] =
                 std::array::from_fn(|k| a[k][0] * p[0] + a[k][1] * p[1] + a[k][2] * p[2] + b[k]);
             // The negated form is also false for NaN.
-            let inside = g[0] >= 0.0
-                && g[1] >= 0.0
-                && g[2] >= 0.0
-                && g[0] < dx
-                && g[1] < dy
-                && g[2] < dz;
+            let inside =
+                g[0] >= 0.0 && g[1] >= 0.0 && g[2] >= 0.0 && g[0] < dx && g[1] < dy && g[2] < dz;
             let s = g.map(floor_in_range);
             let [i, j, k] = s.map(|v| v >> SUB_SHIFT);
             let c = i.wrapping_add(d0.wrapping_mul(j.wrapping_add(d1.wrapping_mul(k))));
@@ -367,8 +357,8 @@ impl InlierGrid {
                     let i = occupied.trailing_zeros() as usize;
                     occupied &= occupied - 1;
                     let c = cells[i] as usize;
-                    count += self.answer_occupied(c, words[i], bits[i], || t.apply(&stage[i]))
-                        as usize;
+                    count +=
+                        self.answer_occupied(c, words[i], bits[i], || t.apply(&stage[i])) as usize;
                 }
             }
             left -= chunk.len();

@@ -41,7 +41,12 @@ mod tests {
             let x = k as f64 * 0.37;
             values.extend([x, x.next_up(), (x + 1.0).next_down(), x + 0.5]);
         }
-        values.extend([1.0f64.next_down(), 2.0f64.next_down(), 1e9 + 0.5, 2147483647.9]);
+        values.extend([
+            1.0f64.next_down(),
+            2.0f64.next_down(),
+            1e9 + 0.5,
+            2147483647.9,
+        ]);
         for v in values {
             assert_eq!(floor_in_range(v), v.floor() as u32, "{v}");
         }

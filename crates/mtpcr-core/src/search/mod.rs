@@ -413,7 +413,10 @@ pub(crate) mod tests {
                     below_cap += single.iter().filter(|&&v| v < cap).count();
                 }
             }
-            assert!(below_cap > 1000, "the test must exercise values below the cap");
+            assert!(
+                below_cap > 1000,
+                "the test must exercise values below the cap"
+            );
         }
     }
 
