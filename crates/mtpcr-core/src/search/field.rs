@@ -12,7 +12,7 @@ use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 
 /// Upper bound on nodes of the distance field (32 MB per cloud at most; each node is one
-/// KD-tree query at build time).
+/// KD-tree query at build time). Node indexes fit in u32 lanes (`capped_distances`).
 const MAX_FIELD_NODES: usize = 1 << 22;
 
 /// Every this many nodes per axis, the build queries a coarse node first (see `build`).

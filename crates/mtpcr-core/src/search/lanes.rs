@@ -3,7 +3,8 @@
 //!
 //! Each batched lookup is written once, as portable code without branches in its locating
 //! loop, and compiled twice: as is (SSE2 on x86-64) and inside a `#[target_feature(enable =
-//! "avx2,bmi1,bmi2,lzcnt,popcnt")]` function called only when [`avx2_detected`]. The two run
+//! "avx2,bmi1,bmi2,lzcnt,popcnt")]` function called only when [`avx2_detected`] (each such
+//! function writes the list out; keep them in step with [`avx2_detected`]). The two run
 //! the same IEEE operations in the same order (FMA is not enabled, and Rust never fuses a
 //! multiply and an add), so they give the same answers bit for bit; the tests run both.
 
