@@ -3,9 +3,7 @@
 //! 1-Lipschitz, so the interpolation is within one node diagonal of the exact value.
 
 use super::grid_frame::GridFrame;
-#[cfg(target_arch = "x86_64")]
-use super::lanes::avx2_detected;
-use super::lanes::floor_in_range;
+use super::lanes::{floor_in_range, Lanes};
 use super::{DistanceIndex, CHUNK};
 use crate::se3::Rigid;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
@@ -30,6 +28,8 @@ pub struct DistanceField {
     /// so that the lookup reads them without converting.
     values: Vec<f64>,
     cap: f64,
+    /// The copy of `sum_capped_distance` that runs (never wider than the CPU's).
+    lanes: Lanes,
 }
 
 impl DistanceField {
@@ -155,6 +155,17 @@ impl DistanceField {
             last_f,
             values: values.into_iter().map(f64::from).collect(),
             cap,
+            lanes: Lanes::widest(),
+        }
+    }
+
+    /// The field answering `sum_capped_distance` with the copy `lanes` (or the widest this
+    /// CPU runs, where that is narrower), so the tests check every copy.
+    #[cfg(test)]
+    pub(super) fn with_lanes(self, lanes: Lanes) -> DistanceField {
+        DistanceField {
+            lanes: lanes.on_this_cpu(),
+            ..self
         }
     }
 }
@@ -254,6 +265,23 @@ impl DistanceField {
     ) -> Option<f64> {
         self.sum_capped_distance_portable(points, t, start, divisor, limit)
     }
+
+    /// `sum_capped_distance_portable` compiled for AVX-512 (see `lanes`).
+    #[cfg(target_arch = "x86_64")]
+    #[allow(unsafe_code)]
+    #[target_feature(
+        enable = "avx2,bmi1,bmi2,lzcnt,popcnt,avx512f,avx512bw,avx512cd,avx512dq,avx512vl"
+    )]
+    unsafe fn sum_capped_distance_avx512(
+        &self,
+        points: &[[f64; 3]],
+        t: &Rigid,
+        start: f64,
+        divisor: f64,
+        limit: f64,
+    ) -> Option<f64> {
+        self.sum_capped_distance_portable(points, t, start, divisor, limit)
+    }
 }
 
 impl DistanceIndex for DistanceField {
@@ -296,53 +324,23 @@ impl DistanceIndex for DistanceField {
         divisor: f64,
         limit: f64,
     ) -> Option<f64> {
-        #[cfg(target_arch = "x86_64")]
-        if avx2_detected() {
-            // SAFETY: the CPU has every feature `sum_capped_distance_avx2` is compiled for.
-            return unsafe { self.sum_capped_distance_avx2(points, t, start, divisor, limit) };
+        // SAFETY: `self.lanes` is never wider than what this CPU runs (`Lanes::widest` at the
+        // build, clamped by `with_lanes`), so the CPU has every feature of the copy called.
+        match self.lanes {
+            #[cfg(target_arch = "x86_64")]
+            Lanes::Avx512 => unsafe {
+                self.sum_capped_distance_avx512(points, t, start, divisor, limit)
+            },
+            #[cfg(target_arch = "x86_64")]
+            Lanes::Avx2 => unsafe {
+                self.sum_capped_distance_avx2(points, t, start, divisor, limit)
+            },
+            _ => self.sum_capped_distance_portable(points, t, start, divisor, limit),
         }
-        self.sum_capped_distance_portable(points, t, start, divisor, limit)
     }
 
     fn memory_bytes(&self) -> usize {
         self.values.len() * 8
-    }
-}
-
-/// The field answering through `sum_capped_distance_portable` whatever the CPU, so the
-/// oracle tests (search/mod.rs) check that code too where the AVX2 code runs.
-#[cfg(test)]
-#[derive(Debug)]
-pub(crate) struct PortableDistanceField(pub DistanceField);
-
-#[cfg(test)]
-impl DistanceIndex for PortableDistanceField {
-    fn cap(&self) -> f64 {
-        self.0.cap()
-    }
-
-    fn capped_distance(&self, p: &[f64; 3]) -> f64 {
-        self.0.capped_distance(p)
-    }
-
-    fn error_bound(&self) -> f64 {
-        self.0.error_bound()
-    }
-
-    fn sum_capped_distance(
-        &self,
-        points: &[[f64; 3]],
-        t: &Rigid,
-        start: f64,
-        divisor: f64,
-        limit: f64,
-    ) -> Option<f64> {
-        self.0
-            .sum_capped_distance_portable(points, t, start, divisor, limit)
-    }
-
-    fn memory_bytes(&self) -> usize {
-        self.0.memory_bytes()
     }
 }
 

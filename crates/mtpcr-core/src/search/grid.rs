@@ -6,9 +6,7 @@
 //! land in empty cells.
 
 use super::grid_frame::GridFrame;
-#[cfg(target_arch = "x86_64")]
-use super::lanes::avx2_detected;
-use super::lanes::floor_in_range;
+use super::lanes::{floor_in_range, Lanes};
 use super::{dist2, InlierIndex, CHUNK};
 use crate::se3::Rigid;
 use rayon::prelude::*;
@@ -44,6 +42,8 @@ pub struct InlierGrid {
     records: Vec<MixedCell>,
     candidates: Vec<[f64; 3]>,
     eps2: f64,
+    /// The copy of `count_within` that runs (never wider than the CPU's).
+    lanes: Lanes,
 }
 
 /// What a query landing in an occupied cell reads, in one place. A cell wholly within eps of
@@ -211,6 +211,17 @@ impl InlierGrid {
             records,
             candidates,
             eps2,
+            lanes: Lanes::widest(),
+        }
+    }
+
+    /// The grid answering `count_within` with the copy `lanes` (or the widest this CPU
+    /// runs, where that is narrower), so the tests check every copy.
+    #[cfg(test)]
+    pub(super) fn with_lanes(self, lanes: Lanes) -> InlierGrid {
+        InlierGrid {
+            lanes: lanes.on_this_cpu(),
+            ..self
         }
     }
 }
@@ -382,6 +393,22 @@ impl InlierGrid {
     ) -> Option<usize> {
         self.count_within_portable(points, t, needed)
     }
+
+    /// `count_within_portable` compiled for AVX-512 (see `lanes`): eight to a vector, and
+    /// twice the registers.
+    #[cfg(target_arch = "x86_64")]
+    #[allow(unsafe_code)]
+    #[target_feature(
+        enable = "avx2,bmi1,bmi2,lzcnt,popcnt,avx512f,avx512bw,avx512cd,avx512dq,avx512vl"
+    )]
+    unsafe fn count_within_avx512(
+        &self,
+        points: &[[f64; 3]],
+        t: &Rigid,
+        needed: usize,
+    ) -> Option<usize> {
+        self.count_within_portable(points, t, needed)
+    }
 }
 
 impl InlierIndex for InlierGrid {
@@ -397,12 +424,15 @@ impl InlierIndex for InlierGrid {
 
     #[allow(unsafe_code)]
     fn count_within(&self, points: &[[f64; 3]], t: &Rigid, needed: usize) -> Option<usize> {
-        #[cfg(target_arch = "x86_64")]
-        if avx2_detected() {
-            // SAFETY: the CPU has every feature `count_within_avx2` is compiled for.
-            return unsafe { self.count_within_avx2(points, t, needed) };
+        // SAFETY: `self.lanes` is never wider than what this CPU runs (`Lanes::widest` at the
+        // build, clamped by `with_lanes`), so the CPU has every feature of the copy called.
+        match self.lanes {
+            #[cfg(target_arch = "x86_64")]
+            Lanes::Avx512 => unsafe { self.count_within_avx512(points, t, needed) },
+            #[cfg(target_arch = "x86_64")]
+            Lanes::Avx2 => unsafe { self.count_within_avx2(points, t, needed) },
+            _ => self.count_within_portable(points, t, needed),
         }
-        self.count_within_portable(points, t, needed)
     }
 
     fn memory_bytes(&self) -> usize {
@@ -410,30 +440,5 @@ impl InlierIndex for InlierGrid {
             + self.rank.len() * 4
             + self.records.len() * std::mem::size_of::<MixedCell>()
             + self.candidates.len() * 24
-    }
-}
-
-/// The grid answering through `count_within_portable` whatever the CPU, so the oracle tests
-/// (search/mod.rs) check that code too where the AVX2 code runs.
-#[cfg(test)]
-#[derive(Debug)]
-pub(crate) struct PortableInlierGrid(pub InlierGrid);
-
-#[cfg(test)]
-impl InlierIndex for PortableInlierGrid {
-    fn eps(&self) -> f64 {
-        self.0.eps()
-    }
-
-    fn has_point_within(&self, p: &[f64; 3]) -> bool {
-        self.0.has_point_within(p)
-    }
-
-    fn count_within(&self, points: &[[f64; 3]], t: &Rigid, needed: usize) -> Option<usize> {
-        self.0.count_within_portable(points, t, needed)
-    }
-
-    fn memory_bytes(&self) -> usize {
-        self.0.memory_bytes()
     }
 }

@@ -269,6 +269,7 @@ fn morton_sorted(points: Vec<[f64; 3]>) -> Vec<[f64; 3]> {
 
 #[cfg(test)]
 pub(crate) mod tests {
+    use super::lanes::Lanes;
     use super::*;
     use rand::{RngExt, SeedableRng};
     use rand_chacha::ChaCha8Rng;
@@ -288,38 +289,42 @@ pub(crate) mod tests {
     type MakeInlier = fn(&[[f64; 3]], f64) -> Arc<dyn InlierIndex>;
     type MakeDistance = fn(&[[f64; 3]], f64, f64) -> Arc<dyn DistanceIndex>;
 
-    /// Every inlier index, checked against the KD-tree (add a new structure here).
+    /// Every inlier index, checked against the KD-tree (add a new structure here). The
+    /// grid and the field once per copy of their batched lookups (`lanes`): where the CPU
+    /// lacks a copy's features, its entry runs the widest copy the CPU has.
     const INLIER_INDEXES: &[(&str, MakeInlier)] = &[
-        ("grid", |p, eps| {
-            let (lo, hi) = crate::cloud::bounds(p);
-            Arc::new(InlierGrid::build(p, lo, hi, eps))
+        ("grid on AVX-512 lanes", |p, eps| {
+            grid_on(p, eps, Lanes::Avx512)
         }),
-        ("grid without AVX2", |p, eps| {
-            let (lo, hi) = crate::cloud::bounds(p);
-            Arc::new(grid::PortableInlierGrid(InlierGrid::build(p, lo, hi, eps)))
+        ("grid on AVX2 lanes", |p, eps| grid_on(p, eps, Lanes::Avx2)),
+        ("grid on portable lanes", |p, eps| {
+            grid_on(p, eps, Lanes::Portable)
         }),
     ];
 
     /// Every distance index, checked against the KD-tree within its error bound.
     const DISTANCE_INDEXES: &[(&str, MakeDistance)] = &[
-        ("field", |p, eps, cap| {
-            let (lo, hi) = crate::cloud::bounds(p);
-            let kd = KdTreeIndex::new(p, eps, cap);
-            Arc::new(DistanceField::build(p, kd.tree(), lo, hi, 2.0 * eps, cap))
+        ("field on AVX-512 lanes", |p, eps, cap| {
+            field_on(p, eps, cap, Lanes::Avx512)
         }),
-        ("field without AVX2", |p, eps, cap| {
-            let (lo, hi) = crate::cloud::bounds(p);
-            let kd = KdTreeIndex::new(p, eps, cap);
-            Arc::new(field::PortableDistanceField(DistanceField::build(
-                p,
-                kd.tree(),
-                lo,
-                hi,
-                2.0 * eps,
-                cap,
-            )))
+        ("field on AVX2 lanes", |p, eps, cap| {
+            field_on(p, eps, cap, Lanes::Avx2)
+        }),
+        ("field on portable lanes", |p, eps, cap| {
+            field_on(p, eps, cap, Lanes::Portable)
         }),
     ];
+
+    fn grid_on(p: &[[f64; 3]], eps: f64, lanes: Lanes) -> Arc<dyn InlierIndex> {
+        let (lo, hi) = crate::cloud::bounds(p);
+        Arc::new(InlierGrid::build(p, lo, hi, eps).with_lanes(lanes))
+    }
+
+    fn field_on(p: &[[f64; 3]], eps: f64, cap: f64, lanes: Lanes) -> Arc<dyn DistanceIndex> {
+        let (lo, hi) = crate::cloud::bounds(p);
+        let kd = KdTreeIndex::new(p, eps, cap);
+        Arc::new(DistanceField::build(p, kd.tree(), lo, hi, 2.0 * eps, cap).with_lanes(lanes))
+    }
 
     #[test]
     fn inlier_indexes_answer_as_the_kd_tree_on_random_queries() {
