@@ -50,7 +50,8 @@ impl PreparedProblem {
             .collect();
         let mut losses: Vec<&dyn Loss> = aiding.iter().map(|l| l as &dyn Loss).collect();
         losses.extend(original.iter().map(|l| l as &dyn Loss));
-        let seeds = self.seeds(config)?;
+        // In the pool: the feature matching runs in parallel and must use `num_threads`.
+        let seeds = pool.install(|| self.seeds(config))?;
         let tasks = Tasks {
             graph,
             losses,

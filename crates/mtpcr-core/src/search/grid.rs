@@ -64,17 +64,26 @@ struct MixedCell {
 const SUB_SHIFT: u32 = 2;
 const SUB: usize = 1 << SUB_SHIFT;
 
-/// Squared distances from `p` to the nearest and the farthest point of the box `[b0, b0 + h]^3`.
+/// Squared distances from `p` to the nearest and the farthest point of `[b0, b0 + h]` on one
+/// axis.
+#[inline]
+fn axis_distances2(p: f64, b0: f64, h: f64) -> (f64, f64) {
+    let b1 = b0 + h;
+    let m = (b0 - p).max(0.0).max(p - b1);
+    let f = (p - b0).abs().max((p - b1).abs());
+    (m * m, f * f)
+}
+
+/// Squared distances from `p` to the nearest and the farthest point of the box `[b0, b0 + h]^3`
+/// (the axes' terms added in axis order, as the sub-cell masks of `build` add them).
 #[inline]
 fn box_distances2(p: &[f64; 3], b0: [f64; 3], h: f64) -> (f64, f64) {
     let mut near = 0.0;
     let mut far = 0.0;
     for a in 0..3 {
-        let b1 = b0[a] + h;
-        let m = (b0[a] - p[a]).max(0.0).max(p[a] - b1);
-        near += m * m;
-        let f = (p[a] - b0[a]).abs().max((p[a] - b1).abs());
-        far += f * f;
+        let (m, f) = axis_distances2(p[a], b0[a], h);
+        near += m;
+        far += f;
     }
     (near, far)
 }
@@ -147,24 +156,29 @@ impl InlierGrid {
                     (cu / frame.dims[0]) % frame.dims[1],
                     cu / (frame.dims[0] * frame.dims[1]),
                 ];
-                let (mut full, mut empty) = (0u64, 0u64);
-                for bit in 0..SUB * SUB * SUB {
-                    let sub = [bit % SUB, (bit / SUB) % SUB, bit / (SUB * SUB)];
-                    let b0 = std::array::from_fn(|a| {
-                        frame.origin[a] + cell_idx[a] as f64 * h + sub[a] as f64 * hs
+                // A sub-cell's distances are sums of one term per axis, and each axis has
+                // only SUB sub-cell positions: per candidate, 3 x SUB terms, then 64 sums.
+                let (mut full, mut near) = (0u64, 0u64);
+                for &(_, pi) in &pairs[g..e] {
+                    let p = &points[pi as usize];
+                    let terms: [[(f64, f64); SUB]; 3] = std::array::from_fn(|a| {
+                        std::array::from_fn(|s| {
+                            let b0 = frame.origin[a] + cell_idx[a] as f64 * h + s as f64 * hs;
+                            axis_distances2(p[a], b0, hs)
+                        })
                     });
-                    let mut any_near = false;
-                    for &(_, pi) in &pairs[g..e] {
-                        let (dmin, dmax) = box_distances2(&points[pi as usize], b0, hs);
-                        if dmax <= full_below {
-                            full |= 1 << bit;
+                    for bit in 0..SUB * SUB * SUB {
+                        let sub = [bit % SUB, (bit / SUB) % SUB, bit / (SUB * SUB)];
+                        let (mut dmin, mut dmax) = (0.0, 0.0);
+                        for a in 0..3 {
+                            dmin += terms[a][sub[a]].0;
+                            dmax += terms[a][sub[a]].1;
                         }
-                        any_near |= dmin <= near_below;
-                    }
-                    if !any_near {
-                        empty |= 1 << bit;
+                        full |= ((dmax <= full_below) as u64) << bit;
+                        near |= ((dmin <= near_below) as u64) << bit;
                     }
                 }
+                let empty = !near;
                 (full, empty)
             })
             .collect();
