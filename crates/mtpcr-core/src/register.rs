@@ -17,6 +17,7 @@ use crate::se3::{
     Transform,
 };
 use crate::verdict::{check_edge, judge};
+use rayon::prelude::*;
 use std::ops::ControlFlow;
 use std::time::Instant;
 
@@ -153,9 +154,11 @@ impl PreparedProblem {
     /// combination that closes the loop first (the paper's loop as a verifier).
     fn seeds(&self, config: &Config) -> Result<Vec<Vec<Individual>>> {
         let graph = self.graph();
+        // The edges side by side (each one's matching is parallel too, but in small steps
+        // that leave threads idle).
         let mut scored: Vec<Vec<(Transform, f64)>> = graph
             .edges()
-            .iter()
+            .par_iter()
             .map(|e| {
                 let loss = self.inlier_loss(e.source, e.target);
                 let mut found: Vec<(Transform, f64)> = self
