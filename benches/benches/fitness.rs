@@ -1,9 +1,11 @@
 //! One evaluation of each loss, exact (KD-tree) and fast path, on bunny-size clouds at the
-//! default sampling (about 2,000 points per cloud after farthest-point sampling).
+//! default sampling (about 2,000 points per cloud after farthest-point sampling), and the
+//! building of one cloud's indexes.
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use mtpcr_benches::bunny_a_or_synthetic;
 use mtpcr_core::loss::{CappedDistanceLoss, InlierLoss, Loss};
+use mtpcr_core::search::IndexedCloud;
 use mtpcr_core::se3::{decode, random_rigid, Rigid};
 use mtpcr_core::{Config, PreparedProblem, SearchMethod};
 use rand::SeedableRng;
@@ -81,6 +83,22 @@ fn losses(c: &mut Criterion) {
             },
         );
     }
+    group.finish();
+
+    // What each loss's indexes cost to build, once per cloud and run: the KD-tree, the
+    // inlier grid and the distance field of one prepared cloud (two threads, as a run has).
+    let mut group = c.benchmark_group(format!("index_build/{label}"));
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .build()
+        .expect("a pool of two threads");
+    group.bench_function("Fast", |bench| {
+        bench.iter(|| {
+            pool.install(|| {
+                IndexedCloud::new(a.points().to_vec(), a.eps(), a.cap(), SearchMethod::Fast)
+            })
+        })
+    });
     group.finish();
 }
 
