@@ -5,8 +5,8 @@
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use mtpcr_benches::bunny_a_or_synthetic;
 use mtpcr_core::loss::{CappedDistanceLoss, InlierLoss, Loss};
-use mtpcr_core::search::IndexedCloud;
 use mtpcr_core::se3::{decode, random_rigid, Rigid};
+use mtpcr_core::search::IndexedCloud;
 use mtpcr_core::{Config, PreparedProblem, SearchMethod};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
