@@ -3,7 +3,7 @@
 //! 1-Lipschitz, so the interpolation is within one node diagonal of the exact value.
 
 use super::grid_frame::GridFrame;
-use super::lanes::{floor_in_range, Lanes};
+use super::lanes::{dispatch_by_lanes, floor_in_range, Lanes};
 use super::{DistanceIndex, CHUNK};
 use crate::se3::Rigid;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
@@ -250,39 +250,22 @@ impl DistanceField {
         let c1 = c01 + (c11 - c01) * v;
         c0 + (c1 - c0) * w
     }
-
-    /// `sum_capped_distance_portable` compiled for AVX2 (see `lanes`).
-    #[cfg(target_arch = "x86_64")]
-    #[allow(unsafe_code)]
-    #[target_feature(enable = "avx2,bmi1,bmi2,lzcnt,popcnt")]
-    unsafe fn sum_capped_distance_avx2(
-        &self,
-        points: &[[f64; 3]],
-        t: &Rigid,
-        start: f64,
-        divisor: f64,
-        limit: f64,
-    ) -> Option<f64> {
-        self.sum_capped_distance_portable(points, t, start, divisor, limit)
-    }
-
-    /// `sum_capped_distance_portable` compiled for AVX-512 (see `lanes`).
-    #[cfg(target_arch = "x86_64")]
-    #[allow(unsafe_code)]
-    #[target_feature(
-        enable = "avx2,bmi1,bmi2,lzcnt,popcnt,avx512f,avx512bw,avx512cd,avx512dq,avx512vl"
-    )]
-    unsafe fn sum_capped_distance_avx512(
-        &self,
-        points: &[[f64; 3]],
-        t: &Rigid,
-        start: f64,
-        divisor: f64,
-        limit: f64,
-    ) -> Option<f64> {
-        self.sum_capped_distance_portable(points, t, start, divisor, limit)
-    }
 }
+
+// `sum_capped_distance_lanes`: `sum_capped_distance_portable` as compiled for the field's
+// `lanes`.
+dispatch_by_lanes!(
+    DistanceField,
+    fn sum_capped_distance_lanes(
+        &self,
+        points: &[[f64; 3]],
+        t: &Rigid,
+        start: f64,
+        divisor: f64,
+        limit: f64
+    ) -> Option<f64>
+        => sum_capped_distance_portable
+);
 
 impl DistanceIndex for DistanceField {
     fn cap(&self) -> f64 {
@@ -315,7 +298,6 @@ impl DistanceIndex for DistanceField {
         self.interpolate(b, u, v, w)
     }
 
-    #[allow(unsafe_code)]
     fn sum_capped_distance(
         &self,
         points: &[[f64; 3]],
@@ -324,19 +306,7 @@ impl DistanceIndex for DistanceField {
         divisor: f64,
         limit: f64,
     ) -> Option<f64> {
-        // SAFETY: `self.lanes` is never wider than what this CPU runs (`Lanes::widest` at the
-        // build, clamped by `with_lanes`), so the CPU has every feature of the copy called.
-        match self.lanes {
-            #[cfg(target_arch = "x86_64")]
-            Lanes::Avx512 => unsafe {
-                self.sum_capped_distance_avx512(points, t, start, divisor, limit)
-            },
-            #[cfg(target_arch = "x86_64")]
-            Lanes::Avx2 => unsafe {
-                self.sum_capped_distance_avx2(points, t, start, divisor, limit)
-            },
-            _ => self.sum_capped_distance_portable(points, t, start, divisor, limit),
-        }
+        self.sum_capped_distance_lanes(points, t, start, divisor, limit)
     }
 
     fn memory_bytes(&self) -> usize {

@@ -2,12 +2,12 @@
 //! vectorizes, and the choice of the widest vectors the CPU runs.
 //!
 //! Each batched lookup is written once, as portable code without branches in its locating
-//! loop, and compiled three times: as is (SSE2 on x86-64), inside a `#[target_feature]`
-//! function for AVX2 and inside one for AVX-512 (the x86-64-v4 set). An index picks its copy
-//! when it is built ([`Lanes::widest`]); the unsafe call of a copy is sound because an index
-//! never holds a [`Lanes`] wider than the CPU's. The feature lists are written out at each
-//! such function (an attribute takes a literal): keep them equal to the checks of `has_avx2` and
-//! `has_avx512`.
+//! loop, and compiled three times by [`dispatch_by_lanes`]: as is (SSE2 on x86-64), inside a
+//! `#[target_feature]` function for AVX2 and inside one for AVX-512 (the x86-64-v4 set). An
+//! index picks its copy when it is built ([`Lanes::widest`]); the unsafe call of a copy is
+//! sound because an index never holds a [`Lanes`] wider than the CPU's. The macro's feature
+//! lists (an attribute takes a literal) must stay equal to the checks of `has_avx2` and
+//! `has_avx512` below it.
 //! All copies run the same IEEE operations in the same order (Rust never fuses a multiply and
 //! an add, even where the CPU has FMA), so they give the same answers bit for bit; the tests
 //! run every copy the CPU has.
@@ -78,6 +78,44 @@ impl Lanes {
         self.min(Lanes::widest())
     }
 }
+
+/// `impl $ty { $vis fn $name(&self, args) -> ret }` running `self.$portable(args)` as
+/// compiled for `self.lanes` (a [`Lanes`] field the type keeps, never wider than the CPU's):
+/// the one place the copies' feature lists and their unsafe calls are written.
+macro_rules! dispatch_by_lanes {
+    ($ty:ty, $vis:vis fn $name:ident(&self $(, $arg:ident: $arg_ty:ty)*) -> $ret:ty
+        => $portable:ident) => {
+        impl $ty {
+            #[allow(unsafe_code)]
+            #[inline]
+            $vis fn $name(&self $(, $arg: $arg_ty)*) -> $ret {
+                #[cfg(target_arch = "x86_64")]
+                #[target_feature(enable = "avx2,bmi1,bmi2,lzcnt,popcnt")]
+                unsafe fn avx2(this: &$ty $(, $arg: $arg_ty)*) -> $ret {
+                    this.$portable($($arg),*)
+                }
+                #[cfg(target_arch = "x86_64")]
+                #[target_feature(
+                    enable = "avx2,bmi1,bmi2,lzcnt,popcnt,avx512f,avx512bw,avx512cd,avx512dq,avx512vl"
+                )]
+                unsafe fn avx512(this: &$ty $(, $arg: $arg_ty)*) -> $ret {
+                    this.$portable($($arg),*)
+                }
+                // SAFETY: `self.lanes` is never wider than what this CPU runs (`Lanes::widest`
+                // at the build, clamped by `with_lanes`), so the CPU has every feature of the
+                // copy called.
+                match self.lanes {
+                    #[cfg(target_arch = "x86_64")]
+                    Lanes::Avx512 => unsafe { avx512(self $(, $arg)*) },
+                    #[cfg(target_arch = "x86_64")]
+                    Lanes::Avx2 => unsafe { avx2(self $(, $arg)*) },
+                    _ => self.$portable($($arg),*),
+                }
+            }
+        }
+    };
+}
+pub(super) use dispatch_by_lanes;
 
 #[cfg(test)]
 mod tests {
