@@ -31,7 +31,7 @@ pub(super) enum Lanes {
     Portable,
     /// Compiled for AVX2 (`has_avx2`).
     Avx2,
-    /// Compiled for AVX-512 (`has_avx512`): about 1.4x the AVX2 copy's throughput of
+    /// Compiled for AVX-512 (`has_avx512`): about 1.2x the AVX2 copy's throughput of
     /// the original loss on an AMD EPYC (`cargo bench --bench fitness`).
     Avx512,
 }
