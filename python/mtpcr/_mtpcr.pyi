@@ -173,9 +173,9 @@ class Config:
         not the answer. Paper: false."""
     @property
     def refine_iterations(self) -> int:
-        """Iterations of the joint trimmed point-to-plane ICP of all clouds after the
-        evolution, which closes the loop exactly (beyond the paper); 0 = off, at most
-        10000. Paper: 0."""
+        """Iterations of the joint trimmed, residual-weighted point-to-plane ICP of all
+        clouds after the evolution, which closes the loop exactly (beyond the paper); 0
+        = off, at most 10000. Paper: 0."""
     @property
     def hypotheses(self) -> int:
         """Pose hypotheses per edge from local features (FPFH keypoints matched both

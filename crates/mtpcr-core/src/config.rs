@@ -143,8 +143,9 @@ settings! {
     /// within 5 degrees; beyond the paper): more restarts would change the cost, not the
     /// answer. Paper: false.
     stop_when_restarts_agree: bool = false,
-    /// Iterations of the joint trimmed point-to-plane ICP of all clouds after the evolution,
-    /// which closes the loop exactly (beyond the paper); 0 = off, at most 10000. Paper: 0.
+    /// Iterations of the joint trimmed, residual-weighted point-to-plane ICP of all clouds
+    /// after the evolution, which closes the loop exactly (beyond the paper); 0 = off, at most
+    /// 10000. Paper: 0.
     refine_iterations: usize = 0,
     /// Pose hypotheses per edge from local features (FPFH keypoints matched both ways,
     /// verified by RANSAC and refined by ICP; beyond the paper), placed in the edge's initial
