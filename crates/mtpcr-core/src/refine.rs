@@ -48,10 +48,12 @@ const FINAL_TRIM_SPACINGS: f64 = 1.5;
 /// `r`, where `s` is this many times the two clouds' mean self residual (what a perfect fit
 /// leaves, so the weights follow the scan's noise). Real scans hold matches the trim keeps but
 /// no plane explains (scanner artefacts, the edges of the overlap); least squares lets them
-/// pull. Measured against plain least squares (`mtpcr eval`, 2026-12-02): 30 turntable-48
-/// triples mean Err_R x1000 9.37 -> 7.70, the six problems voxelized 3.10 -> 2.92, noise
-/// sigma 0.02 6.48 -> 6.22; synthetic scans with pure Gaussian noise (where least squares is
-/// optimal) 0.760 -> 0.774. Scales of 3 to 10 gave the same picture.
+/// pull. Measured against plain least squares (`eval/2026-12-02f/README.md`): mean Err_R
+/// x1000 of the turntable-48 triples, seeds 0-2, 10.17 -> 9.15 (lower in 76 of 90 runs),
+/// noisy runs lower in 140 of 180, the six problems voxelized 3.10 -> 2.92 and at full
+/// resolution 2.82 -> 2.81; worse on synthetic scans with pure Gaussian noise (where least
+/// squares is optimal; 0.760 -> 0.776) and by a few hundredths of a degree on the 10- and
+/// 15-scan sets. Scales of 3 to 10 gave the same picture.
 const ROBUST_SCALE_SELF_RESIDUALS: f64 = 6.0;
 /// The Cauchy scale is never below this fraction of the final trim, so that a noiseless
 /// scan (self residual 0) does not weight every match 0.
