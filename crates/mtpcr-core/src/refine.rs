@@ -110,6 +110,18 @@ impl NormalEquations {
         }
         self.matched += 1;
     }
+
+    /// Adds these sums to `h` (its upper triangle only) and `g`.
+    fn add_upper_to(&self, h: &mut SMatrix<f64, 12, 12>, g: &mut SVector<f64, 12>) {
+        let mut k = 0;
+        for a in 0..12 {
+            g[a] += self.g[a];
+            for b in a..12 {
+                h[(a, b)] += self.h[k];
+                k += 1;
+            }
+        }
+    }
 }
 
 /// One cloud reduced to surface points for the refinement: each is a scan point projected
@@ -426,14 +438,7 @@ pub(crate) fn refine_poses(
             let mut gij = SVector::<f64, 12>::zeros();
             for block in &blocks {
                 matched += block.matched;
-                let mut k = 0;
-                for a in 0..12 {
-                    gij[a] += block.g[a];
-                    for b in a..12 {
-                        hij[(a, b)] += block.h[k];
-                        k += 1;
-                    }
-                }
+                block.add_upper_to(&mut hij, &mut gij);
             }
             hij.fill_lower_triangle_with_upper_triangle();
             let offsets = [(0, i), (6, j)];
