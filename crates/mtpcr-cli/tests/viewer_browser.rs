@@ -7,9 +7,12 @@
 //! --enable-unsafe-swiftshader`, and `--virtual-time-budget` lets the page's script finish
 //! before the screenshot.
 //!
-//! Rust tests cannot report "skipped", so when Chromium is absent this test FAILS with a
-//! message saying so, unless the environment variable `MTPCR_SKIP_BROWSER_TESTS=1` is set:
-//! then it prints why it checks nothing and passes.
+//! Chromium is optional outside CI. Rust tests cannot report "skipped", so when no Chromium
+//! is found this test checks nothing and passes, but first writes a `SKIPPED viewer_browser`
+//! line straight to stderr (not through the test harness's output capture, so it shows in a
+//! plain `cargo test` run); `scripts/test.sh` repeats it in a NOTE at the end. In CI (the
+//! environment variable `CI` is `true` or `1`, as `.ci/run` sets it) a missing Chromium is a
+//! failure instead, so the view stays tested there.
 //!
 //! The CLI has no library target, so `src/viewer.rs` (which uses nothing else of the CLI) is
 //! compiled into this test with `#[path]`; its unit tests therefore run here too.
@@ -18,6 +21,7 @@
 #[path = "../src/viewer.rs"]
 mod viewer;
 
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
@@ -27,6 +31,11 @@ const HEIGHT: usize = 800;
 /// Part of the window that no overlay box covers at 1200x800 (panel top left, legend top
 /// right, scale bar and help at the bottom): x from, x to, y from, y to.
 const FREE: [usize; 4] = [380, 860, 150, 720];
+
+/// Whether this run is in CI (`CI` is `true` or `1`), where a missing Chromium must fail.
+fn in_ci() -> bool {
+    std::env::var("CI").is_ok_and(|v| v.eq_ignore_ascii_case("true") || v == "1")
+}
 
 /// The Chromium binary, if any.
 fn chromium() -> Option<PathBuf> {
@@ -147,16 +156,21 @@ fn census(pixels: &[[u8; 3]], scans: usize) -> (usize, Vec<usize>) {
 #[test]
 fn viewer_draws_the_scans_in_headless_chromium() {
     let Some(browser) = chromium() else {
-        let why = "Chromium not found (neither `chromium` nor `chromium-browser` on PATH, \
-                   nor MTPCR_CHROMIUM): the 3-D viewer was NOT tested in a browser";
-        if std::env::var("MTPCR_SKIP_BROWSER_TESTS").as_deref() == Ok("1") {
-            eprintln!("SKIPPED: {why} (MTPCR_SKIP_BROWSER_TESTS=1).");
-            return;
-        }
-        panic!(
-            "{why}. Install it (Debian: apt-get install -y chromium) or set \
-             MTPCR_SKIP_BROWSER_TESTS=1 to skip this test on purpose."
+        let why = "no chromium found (neither `chromium` nor `chromium-browser` on PATH, nor \
+                   MTPCR_CHROMIUM): view.html was NOT tested in a browser";
+        assert!(
+            !in_ci(),
+            "viewer_browser: {why}. In CI (CI=true) this is a failure: install Chromium \
+             (Debian: apt-get install -y chromium; .ci/run does this)."
         );
+        // Written to stderr directly: `eprintln!` would be captured (hidden) for a passing
+        // test, and this skip must be seen.
+        let _ = writeln!(
+            std::io::stderr(),
+            "\nSKIPPED viewer_browser: {why} (apt-get install chromium); \
+             set CI=true to make this a failure\n"
+        );
+        return;
     };
 
     // Two spheres: side by side before, (nearly) on top of each other after.
