@@ -12,7 +12,10 @@
 //!    scan places every scan it reaches; verified pairs that agree with the tree and overlap
 //!    well are loop closures. Scans the tree does not reach are reported unplaced, with the
 //!    reason.
-//! 4. **Refinement**: the joint ICP of all placed scans over the tree and the closures.
+//! 4. **Refinement**: the joint ICP of all placed scans over the tree and the closures (pairs
+//!    of placed scans only). A pair that fails the verdict at the refined poses is rejected
+//!    and the scans placed again without it; a scan that so loses its place is reported
+//!    unplaced with the failure.
 
 use crate::config::Config;
 use crate::error::{Error, Result};
@@ -71,79 +74,105 @@ pub(crate) fn register_unordered(
     let tolerance = loop_tolerance(prepared);
     let chosen = verify(&pairs, n, tolerance);
     // A verified pose must also pass the verdict's surface test.
-    let mut rejected: Vec<bool> = pool.install(|| {
+    let rejected: Vec<bool> = pool.install(|| {
         (0..pairs.len())
             .into_par_iter()
             .map(|p| {
-                chosen[p].is_none_or(|h| {
-                    let c = check_edge(
-                        prepared.refine_clouds(),
-                        pairs[p].edge,
-                        &Rigid::from_matrix(&pairs[p].poses[h].0),
-                        prepared.eps(),
-                    );
-                    !(c.overlap >= MIN_OVERLAP && c.residual <= MAX_RESIDUAL)
-                })
+                chosen[p]
+                    .and_then(|h| pairs[p].poses.get(h))
+                    .is_none_or(|(pose, _)| {
+                        let c = check_edge(
+                            prepared.refine_clouds(),
+                            pairs[p].edge,
+                            &Rigid::from_matrix(pose),
+                            prepared.eps(),
+                        );
+                        !(c.overlap >= MIN_OVERLAP && c.residual <= MAX_RESIDUAL)
+                    })
             })
             .collect()
     });
-    let mut dropped: Vec<(usize, String)> = Vec::new();
+    finish(
+        prepared, config, pool, &pairs, &chosen, rejected, seed, start,
+    )
+}
+
+/// Placement, refinement and the result, from the screened pairs, the hypothesis chosen for
+/// each (`None`: unverified) and which are rejected (unverified or failing the surface test).
+///
+/// Invariant (issue 23): a pair is refined, measured or reported only when both its scans
+/// are placed. [`place`] returns only such pairs, and when a scan loses its place (last
+/// round) the pairs touching it go with it; the helpers below skip any other pair rather
+/// than panic.
+#[allow(clippy::too_many_arguments)]
+fn finish(
+    prepared: &PreparedProblem,
+    config: &Config,
+    pool: &rayon::ThreadPool,
+    pairs: &[Pair],
+    chosen: &[Option<usize>],
+    mut rejected: Vec<bool>,
+    seed: u64,
+    start: std::time::Instant,
+) -> Result<Registration> {
+    let n = prepared.clouds().len();
+    if n == 0 {
+        // Preparation refuses an empty set; checked here too, as scan 0 anchors everything.
+        return Err(Error::InvalidInput(
+            "no clouds to register (at least two are needed)".to_string(),
+        ));
+    }
+    let tolerance = loop_tolerance(prepared);
+    // Why each pair failed at the refined poses of a round (`None`: it did not).
+    let mut failed: Vec<Option<String>> = vec![None; pairs.len()];
     let mut round = 0;
-    let (placed, used, refined) = loop {
+    let (used, refined) = loop {
         round += 1;
-        let (mut placed, mut used, poses) = place(&pairs, &chosen, &rejected, n, tolerance);
-        let refined = refine_placed(prepared, config, pool, &pairs, &used, &placed, &poses);
+        let (start_poses, mut used) = place(pairs, chosen, &rejected, n, tolerance);
+        let refined = refine_placed(prepared, config, pool, pairs, &used, &start_poses);
         prepared.interrupt().check()?;
-        let checks: Vec<EdgeCheck> = used
-            .iter()
-            .map(|&p| measure(prepared, &pairs[p], &refined))
-            .collect();
-        let failing: Vec<usize> = used
-            .iter()
+        let (measured, checks) = measure(prepared, pairs, &used, &refined);
+        let failing: Vec<(usize, String)> = measured
+            .into_iter()
             .zip(doubts(&checks))
-            .filter(|(_, d)| d.is_some())
-            .map(|(&p, _)| p)
+            .filter_map(|(p, d)| d.map(|d| (p, d)))
             .collect();
         if failing.is_empty() {
-            break (placed, used, refined);
+            break (used, refined);
         }
-        for &p in &failing {
+        for (p, why) in failing {
             rejected[p] = true;
+            failed[p] = Some(why);
         }
         if round < MAX_ROUNDS {
             continue;
         }
-        // Last round: drop the failing pairs and the scans only they connected.
-        used.retain(|p| !failing.contains(p));
-        let reach = reachable(&pairs, &used, n);
+        // Last round: drop the failing pairs, the scans only they connected to scan 0, and
+        // every pair touching such a scan (its reason comes from `failed`).
+        used.retain(|&p| failed[p].is_none());
+        let reach = reachable(pairs, &used, n);
         used.retain(|&p| reach[pairs[p].edge.source] && reach[pairs[p].edge.target]);
-        for v in 0..n {
-            if placed[v] && !reach[v] {
-                placed[v] = false;
-                dropped.push((
-                    v,
-                    format!(
-                        "scan {}'s fit to the others did not hold at fine scale (its surfaces do not lie on theirs)",
-                        v + 1
-                    ),
-                ));
-            }
-        }
-        let refined = refine_placed(prepared, config, pool, &pairs, &used, &placed, &poses);
-        break (placed, used, refined);
+        let start_poses: Vec<Option<Transform>> = start_poses
+            .iter()
+            .zip(&reach)
+            .map(|(w, &r)| w.filter(|_| r))
+            .collect();
+        let refined = refine_placed(prepared, config, pool, pairs, &used, &start_poses);
+        prepared.interrupt().check()?;
+        break (used, refined);
     };
 
     let edges: Vec<EdgeEstimate> = used
         .iter()
-        .map(|&p| {
+        .filter_map(|&p| {
             let Edge {
                 source: s,
                 target: t,
             } = pairs[p].edge;
-            let (ws, wt) = (refined[s].expect("placed"), refined[t].expect("placed"));
+            let (ws, wt) = (refined[s]?, refined[t]?);
             let centred = invert_rigid(&wt) * ws;
             let r = Rigid::from_matrix(&centred);
-            EdgeEstimate {
+            Some(EdgeEstimate {
                 source: s,
                 target: t,
                 t_target_source: prepared.to_original(s, t, &centred),
@@ -151,29 +180,21 @@ pub(crate) fn register_unordered(
                 aiding_cost: prepared
                     .pair_aiding_loss(s, t, config.two_way_aiding)
                     .evaluate(&r),
-            }
+            })
         })
         .collect();
-    let checks = used
-        .iter()
-        .map(|&p| measure(prepared, &pairs[p], &refined))
-        .collect();
+    let (_, checks) = measure(prepared, pairs, &used, &refined);
     let unplaced: Vec<Unplaced> = (0..n)
-        .filter(|&v| !placed[v])
+        .filter(|&v| refined[v].is_none())
         .map(|v| Unplaced {
             view: v,
-            reason: dropped.iter().find(|(d, _)| *d == v).map_or_else(
-                || unplaced_reason(v, &pairs, &chosen, &rejected),
-                |(_, r)| r.clone(),
-            ),
+            reason: unplaced_reason(v, pairs, chosen, &rejected, &failed),
         })
         .collect();
-    let poses = (0..n)
-        .map(|v| {
-            refined[v]
-                .filter(|_| placed[v])
-                .map(|w| prepared.to_original(v, 0, &w))
-        })
+    let poses = refined
+        .iter()
+        .enumerate()
+        .map(|(v, w)| w.map(|w| prepared.to_original(v, 0, &w)))
         .collect();
     let reasons = unplaced
         .iter()
@@ -201,25 +222,36 @@ pub(crate) fn register_unordered(
     })
 }
 
-/// The verdict's measures of a pair at refined poses.
-fn measure(prepared: &PreparedProblem, pair: &Pair, refined: &[Option<Transform>]) -> EdgeCheck {
-    let Edge {
-        source: s,
-        target: t,
-    } = pair.edge;
-    let (ws, wt) = (refined[s].expect("placed"), refined[t].expect("placed"));
-    check_edge(
-        prepared.refine_clouds(),
-        pair.edge,
-        &Rigid::from_matrix(&(invert_rigid(&wt) * ws)),
-        prepared.eps(),
-    )
+/// The verdict's measures of the `used` pairs at the poses `placed` (`None`: not placed),
+/// with the pairs measured: all of them, as every used pair joins two placed scans (see
+/// [`finish`]); a pair touching an unplaced scan would be skipped.
+fn measure(
+    prepared: &PreparedProblem,
+    pairs: &[Pair],
+    used: &[usize],
+    placed: &[Option<Transform>],
+) -> (Vec<usize>, Vec<EdgeCheck>) {
+    used.iter()
+        .filter_map(|&p| {
+            let edge = pairs[p].edge;
+            let (ws, wt) = (placed[edge.source]?, placed[edge.target]?);
+            let check = check_edge(
+                prepared.refine_clouds(),
+                edge,
+                &Rigid::from_matrix(&(invert_rigid(&wt) * ws)),
+                prepared.eps(),
+            );
+            Some((p, check))
+        })
+        .unzip()
 }
 
-/// The scans connected to scan 0 through the `used` pairs.
+/// The scans connected to scan 0 through the `used` pairs (`n >= 1`).
 fn reachable(pairs: &[Pair], used: &[usize], n: usize) -> Vec<bool> {
     let mut reach = vec![false; n];
-    reach[0] = true;
+    if let Some(first) = reach.first_mut() {
+        *first = true;
+    }
     let mut grew = true;
     while grew {
         grew = false;
@@ -239,20 +271,25 @@ fn reachable(pairs: &[Pair], used: &[usize], n: usize) -> Vec<bool> {
 }
 
 /// The maximum spanning tree (by overlap) of the verified, not rejected pairs from scan 0:
-/// which scans it places, the pairs used (tree and agreeing, well-overlapping closures) and
-/// the poses (centred, into scan 0's frame) along the tree.
+/// the poses (centred, into scan 0's frame) along the tree of the scans it places (`None`:
+/// not placed), and the pairs used (tree and agreeing, well-overlapping closures), each
+/// joining two placed scans.
 fn place(
     pairs: &[Pair],
     chosen: &[Option<usize>],
     rejected: &[bool],
     n: usize,
     tolerance: f64,
-) -> (Vec<bool>, Vec<usize>, Vec<Option<Transform>>) {
-    let pose_of = |p: usize| pairs[p].poses[chosen[p].expect("verified")];
-    let mut order: Vec<usize> = (0..pairs.len())
-        .filter(|&p| chosen[p].is_some() && !rejected[p])
+) -> (Vec<Option<Transform>>, Vec<usize>) {
+    // The verified, not rejected pairs with their chosen pose and its overlap, best first.
+    let mut order: Vec<(usize, Transform, f64)> = (0..pairs.len())
+        .filter(|&p| !rejected[p])
+        .filter_map(|p| {
+            let &(pose, overlap) = pairs[p].poses.get(chosen[p]?)?;
+            Some((p, pose, overlap))
+        })
         .collect();
-    order.sort_by(|&a, &b| pose_of(b).1.total_cmp(&pose_of(a).1).then(a.cmp(&b)));
+    order.sort_by(|a, b| b.2.total_cmp(&a.2).then(a.0.cmp(&b.0)));
     let mut component: Vec<usize> = (0..n).collect();
     fn find(c: &mut [usize], v: usize) -> usize {
         let mut r = v;
@@ -262,30 +299,33 @@ fn place(
         c[v] = r;
         r
     }
-    let mut tree = Vec::new();
-    for &p in &order {
+    // A spanning forest: one tree per group of scans the verified pairs connect.
+    let mut in_tree = vec![false; pairs.len()];
+    let mut tree: Vec<(usize, Transform)> = Vec::new();
+    for &(p, pose, _) in &order {
         let (a, b) = (
             find(&mut component, pairs[p].edge.source),
             find(&mut component, pairs[p].edge.target),
         );
         if a != b {
             component[a.max(b)] = a.min(b);
-            tree.push(p);
+            in_tree[p] = true;
+            tree.push((p, pose));
         }
     }
-    let root = find(&mut component, 0);
-    let placed: Vec<bool> = (0..n).map(|v| find(&mut component, v) == root).collect();
+    // Only scan 0's tree is placed: poses spread from scan 0 along the tree edges.
     let mut poses: Vec<Option<Transform>> = vec![None; n];
-    poses[0] = Some(Transform::identity());
+    if let Some(first) = poses.first_mut() {
+        *first = Some(Transform::identity());
+    }
     let mut grew = true;
     while grew {
         grew = false;
-        for &p in &tree {
+        for &(p, t_ts) in &tree {
             let Edge {
                 source: s,
                 target: t,
             } = pairs[p].edge;
-            let t_ts = pose_of(p).0;
             match (poses[s], poses[t]) {
                 (Some(ws), None) => {
                     poses[t] = Some(ws * invert_rigid(&t_ts));
@@ -299,9 +339,19 @@ fn place(
             }
         }
     }
-    let mut used = tree.clone();
-    for &p in &order {
-        if tree.contains(&p) || pose_of(p).1 < CLOSURE_MIN_OVERLAP {
+    let both_placed = |p: usize| {
+        let Edge { source, target } = pairs[p].edge;
+        poses[source].is_some() && poses[target].is_some()
+    };
+    // The trees of the other groups join scans that are not placed: not used (issue 23: the
+    // refinement and the measurement met such a pair and panicked).
+    let mut used: Vec<usize> = tree
+        .iter()
+        .map(|&(p, _)| p)
+        .filter(|&p| both_placed(p))
+        .collect();
+    for &(p, own, overlap) in &order {
+        if in_tree[p] || overlap < CLOSURE_MIN_OVERLAP {
             continue;
         }
         let Edge {
@@ -310,7 +360,6 @@ fn place(
         } = pairs[p].edge;
         if let (Some(ws), Some(wt)) = (poses[s], poses[t]) {
             let implied = invert_rigid(&wt) * ws;
-            let own = pose_of(p).0;
             if rotation_error_deg(&implied, &own) < CLOSURE_DEGREES
                 && translation_error(&implied, &own) < tolerance
             {
@@ -319,40 +368,41 @@ fn place(
         }
     }
     used.sort_unstable();
-    (placed, used, poses)
+    (poses, used)
 }
 
-/// The poses (centred, into scan 0's frame) of the placed scans after the joint ICP over the
-/// `used` pairs (the start poses when refinement is off); `None` for the others.
+/// The poses (centred, into scan 0's frame) of the placed scans (`start`; `None`: not
+/// placed) after the joint ICP over the `used` pairs (the start poses when refinement is
+/// off). A used pair touching an unplaced scan (none, see [`finish`]) would be left out.
 fn refine_placed(
     prepared: &PreparedProblem,
     config: &Config,
     pool: &rayon::ThreadPool,
     pairs: &[Pair],
     used: &[usize],
-    placed: &[bool],
-    poses: &[Option<Transform>],
+    start: &[Option<Transform>],
 ) -> Vec<Option<Transform>> {
-    let n = placed.len();
-    let mut all: Vec<Option<Transform>> = (0..n).map(|v| poses[v].filter(|_| placed[v])).collect();
     if config.refine_iterations == 0 {
-        return all;
+        return start.to_vec();
     }
     let full = prepared.refine_clouds();
-    let index: Vec<usize> = (0..n).filter(|&v| placed[v]).collect();
-    let local = |v: usize| index.iter().position(|&x| x == v).expect("placed");
+    // The placed scans, and each scan's position among them.
+    let index: Vec<usize> = (0..start.len()).filter(|&v| start[v].is_some()).collect();
+    let mut local: Vec<Option<usize>> = vec![None; start.len()];
+    for (k, &v) in index.iter().enumerate() {
+        local[v] = Some(k);
+    }
     let clouds: Vec<_> = index.iter().map(|&v| &full[v]).collect();
     let edges: Vec<Edge> = used
         .iter()
-        .map(|&p| Edge {
-            source: local(pairs[p].edge.source),
-            target: local(pairs[p].edge.target),
+        .filter_map(|&p| {
+            Some(Edge {
+                source: local[pairs[p].edge.source]?,
+                target: local[pairs[p].edge.target]?,
+            })
         })
         .collect();
-    let start_poses: Vec<Rigid> = index
-        .iter()
-        .map(|&v| Rigid::from_matrix(&poses[v].expect("placed")))
-        .collect();
+    let start_poses: Vec<Rigid> = start.iter().flatten().map(Rigid::from_matrix).collect();
     let interrupt = prepared.interrupt();
     let out = refine_poses(
         &clouds,
@@ -363,8 +413,9 @@ fn refine_placed(
         pool,
         &|| interrupt.is_set(),
     );
-    for (k, &v) in index.iter().enumerate() {
-        all[v] = Some(out[k].to_matrix());
+    let mut all = start.to_vec();
+    for (&v, pose) in index.iter().zip(out) {
+        all[v] = Some(pose.to_matrix());
     }
     all
 }
@@ -467,12 +518,13 @@ pub(crate) fn loop_tolerance(prepared: &PreparedProblem) -> f64 {
     LOOP_SHIFT_FRACTION * prepared.shift()
 }
 
-/// Why scan `v` could not be placed.
+/// Why scan `v` could not be placed (`failed`: why a pair failed at refined poses).
 fn unplaced_reason(
     v: usize,
     pairs: &[Pair],
     chosen: &[Option<usize>],
     rejected: &[bool],
+    failed: &[Option<String>],
 ) -> String {
     let mine: Vec<usize> = (0..pairs.len())
         .filter(|&p| pairs[p].edge.source == v || pairs[p].edge.target == v)
@@ -481,9 +533,21 @@ fn unplaced_reason(
         .iter()
         .filter_map(|&p| pairs[p].poses.first().map(|h| h.1))
         .fold(0.0, f64::max);
-    if mine.iter().any(|&p| chosen[p].is_some() && !rejected[p]) {
+    // A pair of this scan that failed after refinement: it was placed in a round, then lost
+    // its place.
+    if let Some(why) = mine.iter().find_map(|&p| failed[p].as_deref()) {
+        format!(
+            "scan {}'s fit to the others did not hold at fine scale ({why})",
+            v + 1
+        )
+    } else if mine.iter().any(|&p| chosen[p].is_some() && !rejected[p]) {
         format!(
             "scan {} overlaps others only in a group not connected to scan 1",
+            v + 1
+        )
+    } else if mine.iter().any(|&p| chosen[p].is_some()) {
+        format!(
+            "the poses of scan {} confirmed by three-scan loops failed the surface test (overlap at least {MIN_OVERLAP} and residual at most {MAX_RESIDUAL} of eps needed)",
             v + 1
         )
     } else {
@@ -492,5 +556,141 @@ fn unplaced_reason(
             v + 1,
             best
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::problem::thread_pool;
+    use crate::synthetic::views_around;
+
+    /// A prepared problem of `count` synthetic views (no feature hypotheses: the tests craft
+    /// the pairs) and every pair's true pose (centred frames) as its one hypothesis.
+    fn problem(seed: u64, count: usize, config: &Config) -> (PreparedProblem, Vec<Pair>) {
+        let v = views_around(seed, count, 1500);
+        let prepared = PreparedProblem::new(
+            &v.clouds,
+            &Config {
+                hypotheses: 0,
+                ..config.clone()
+            },
+        )
+        .unwrap();
+        let pairs = (0..count)
+            .flat_map(|s| {
+                (s + 1..count).map(move |t| Edge {
+                    source: s,
+                    target: t,
+                })
+            })
+            .map(|edge| {
+                let truth = invert_rigid(&v.poses[edge.target]) * v.poses[edge.source];
+                Pair {
+                    edge,
+                    poses: vec![(prepared.to_centred(edge.source, edge.target, &truth), 0.8)],
+                }
+            })
+            .collect();
+        (prepared, pairs)
+    }
+
+    /// Which pairs are verified (their one hypothesis chosen), from their ends.
+    fn choose(pairs: &[Pair], verified: &[(usize, usize)]) -> Vec<Option<usize>> {
+        pairs
+            .iter()
+            .map(|p| {
+                verified
+                    .contains(&(p.edge.source, p.edge.target))
+                    .then_some(0)
+            })
+            .collect()
+    }
+
+    fn run(
+        prepared: &PreparedProblem,
+        config: &Config,
+        pairs: &[Pair],
+        chosen: &[Option<usize>],
+    ) -> Registration {
+        let pool = thread_pool(1).unwrap();
+        let rejected = chosen.iter().map(Option::is_none).collect();
+        finish(
+            prepared,
+            config,
+            &pool,
+            pairs,
+            chosen,
+            rejected,
+            0,
+            std::time::Instant::now(),
+        )
+        .unwrap()
+    }
+
+    /// Issue 23: verified pairs in a group not connected to scan 1 were kept as spanning-tree
+    /// edges of their own group, so the refinement (and, without it, the measurement) met a
+    /// pair of unplaced scans and panicked (`expect("placed")`).
+    #[test]
+    fn a_verified_group_apart_from_scan_1_is_reported_unplaced() {
+        for refine_iterations in [20, 0] {
+            let config = Config {
+                refine_iterations,
+                num_threads: 1,
+                ..Config::default()
+            };
+            let (prepared, pairs) = problem(31, 5, &config);
+            // Scans 1 and 2 match; scans 3, 4, 5 match each other (a closed triangle) but
+            // neither of the first two.
+            let chosen = choose(&pairs, &[(0, 1), (2, 3), (3, 4), (2, 4)]);
+            let r = run(&prepared, &config, &pairs, &chosen);
+            let ends: Vec<(usize, usize)> = r.edges.iter().map(|e| (e.source, e.target)).collect();
+            assert_eq!(ends, [(0, 1)], "refine_iterations {refine_iterations}");
+            assert!(r.poses[0].is_some() && r.poses[1].is_some());
+            assert!(r.poses[2..].iter().all(Option::is_none), "{:?}", r.poses);
+            let unplaced: Vec<usize> = r.unplaced.iter().map(|u| u.view).collect();
+            assert_eq!(unplaced, [2, 3, 4]);
+            for u in &r.unplaced {
+                assert!(
+                    u.reason.contains(&format!("scan {}", u.view + 1))
+                        && u.reason.contains("not connected to scan 1"),
+                    "{}",
+                    u.reason
+                );
+            }
+            assert_eq!(r.verdict.edges.len(), 1);
+            assert!(!r.verdict.confident);
+        }
+    }
+
+    /// A scan placed in the first round by a pair that fails at the refined poses loses its
+    /// place in the next; it is reported unplaced, saying why, and no pair touches it.
+    #[test]
+    fn a_scan_whose_only_pair_fails_after_refinement_is_reported_unplaced() {
+        let config = Config {
+            num_threads: 1,
+            ..Config::default()
+        };
+        let (prepared, mut pairs) = problem(32, 4, &config);
+        // Scan 4's one verified pair (with scan 3) has a pose a quarter turn off.
+        let wrong = pairs
+            .iter()
+            .position(|p| (p.edge.source, p.edge.target) == (2, 3))
+            .unwrap();
+        let turn = Rigid::from_individual(&[90.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+        pairs[wrong].poses[0].0 = turn.to_matrix() * pairs[wrong].poses[0].0;
+        let chosen = choose(&pairs, &[(0, 1), (1, 2), (0, 2), (2, 3)]);
+        let r = run(&prepared, &config, &pairs, &chosen);
+        assert!(r.edges.iter().all(|e| e.source != 3 && e.target != 3));
+        assert!(r.poses[..3].iter().all(Option::is_some));
+        assert_eq!(r.poses[3], None);
+        assert_eq!(r.unplaced.len(), 1, "{:?}", r.unplaced);
+        assert_eq!(r.unplaced[0].view, 3);
+        assert!(
+            r.unplaced[0].reason.contains("scan 4")
+                && r.unplaced[0].reason.contains("at fine scale"),
+            "{}",
+            r.unplaced[0].reason
+        );
     }
 }

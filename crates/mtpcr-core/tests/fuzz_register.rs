@@ -5,7 +5,9 @@
 #[path = "common/fuzz_input.rs"]
 mod fuzz_input;
 
-/// Inputs the fuzzer crashed on (minimised), with what went wrong.
+/// Inputs the fuzzer crashed on (minimised), or that crashed the engine through this decoder
+/// (the issue-23 ones: found by running the decoder's scenes against the unfixed engine),
+/// with what went wrong.
 const CRASHES: &[(&str, &[u8])] = &[
     (
         "segfault in nalgebra's LU solve of a 0 x 0 system: refine_poses with one cloud placed \
@@ -18,6 +20,18 @@ const CRASHES: &[(&str, &[u8])] = &[
         &[4, 43, 39],
     ),
     ("the same MFEA panic, on another input", &[67, 237, 249]),
+    (
+        "issue 23: multiview.rs panicked (refine_placed, expect(\"placed\")): scans verified \
+         among themselves in a group apart from scan 1 kept their spanning-tree pairs, which \
+         the refinement met with both scans unplaced (9 scans in no known order, one group \
+         apart; refine_iterations 1)",
+        &[47, 0, 0],
+    ),
+    (
+        "issue 23 without refinement: the same pairs reached the measurement (measure, \
+         expect(\"placed\")); 7 scans, refine_iterations 0",
+        &[29, 0, 0],
+    ),
 ];
 
 #[test]
