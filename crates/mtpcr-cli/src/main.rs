@@ -9,6 +9,7 @@ mod error;
 mod experiment;
 mod interrupt;
 mod output;
+mod pairs;
 mod plots;
 mod progress;
 mod settings;
@@ -84,14 +85,20 @@ enum Command {
         #[command(flatten)]
         run: RunArgs,
     },
-    /// Evaluate on problem files (shared/problems format) against their ground truth.
+    /// Evaluate on problem files (shared/problems format) or pair benchmarks against their
+    /// ground truth.
+    ///
+    /// A folder is a pair benchmark in the 3DMatch layout (a gt.log per scene folder, e.g.
+    /// ../shared/data/3dmatch/benchmarks/3DLoMatch): every pair registered once and scored as
+    /// in the literature (registered: rotation error < 15 deg and translation error < 0.3),
+    /// with per-scene and overall recall, errors, seconds and the verdict's confusion.
     Eval {
-        /// Problem files.
+        /// Problem files, or pair benchmark folders.
         #[arg(required = true, value_name = "PROBLEM")]
         problems: Vec<PathBuf>,
-        /// Runs per problem.
-        #[arg(long, default_value_t = 10)]
-        runs: usize,
+        /// Runs per problem [default: 10; pair benchmarks: 1 per pair].
+        #[arg(long)]
+        runs: Option<usize>,
         /// Seed of the first run; run r uses seed + r [default: the config file's, else 0].
         #[arg(long)]
         seed: Option<u64>,
@@ -110,6 +117,8 @@ enum Command {
         /// centred and scaled to unit size; seeded from each run's seed).
         #[arg(long, value_name = "SIGMA")]
         noise: Option<f64>,
+        #[command(flatten)]
+        pairs: pairs::PairArgs,
         #[command(flatten)]
         run: RunArgs,
     },
@@ -658,10 +667,32 @@ fn main() -> ExitCode {
             json,
             ground_truth_frame,
             noise,
+            pairs: pair_args,
+            run,
+        } if problems.iter().any(|p| p.is_dir()) => pairs::eval_pairs(
+            problems,
+            *runs,
+            *seed,
+            data_root.as_deref(),
+            json.as_deref(),
+            (*ground_truth_frame, *noise),
+            pair_args,
+            run,
+        )
+        .map(|_| ExitCode::SUCCESS),
+        Command::Eval {
+            problems,
+            runs,
+            seed,
+            data_root,
+            json,
+            ground_truth_frame,
+            noise,
+            pairs: _,
             run,
         } => eval(
             problems,
-            *runs,
+            runs.unwrap_or(10),
             *seed,
             data_root.as_deref(),
             json.as_deref(),

@@ -64,3 +64,46 @@ fn bunny_a_is_registered_within_five_degrees() {
     assert!(scores.err_r < 0.05, "Err_R {}", scores.err_r);
     assert!(result.loop_residual().unwrap() < 0.05);
 }
+
+#[test]
+#[cfg_attr(
+    not(shared_data),
+    ignore = "needs ../shared (or MTPCR_SHARED_DIR), not found at build time"
+)]
+fn most_of_a_sample_of_3dmatch_pairs_is_registered() {
+    use mtpcr_core::eval::pairs::{run_pair, summarize, FragmentCache, PairBenchmark};
+    let dir = common::shared_dir().join("data/3dmatch/benchmarks/3DMatch");
+    let mut benchmark = PairBenchmark::load(&dir, None).unwrap_or_else(|e| panic!("{e}"));
+    assert!(
+        benchmark.cases.len() > 100,
+        "{} pairs",
+        benchmark.cases.len()
+    );
+    benchmark.sample(6, 3);
+    let mut cache = FragmentCache::default();
+    let mut records = Vec::new();
+    for case in benchmark.cases.clone() {
+        let target = cache
+            .get(&benchmark, &case.scene, case.target)
+            .unwrap()
+            .clone();
+        let source = cache
+            .get(&benchmark, &case.scene, case.source)
+            .unwrap()
+            .clone();
+        let (record, _) = run_pair(
+            "3DMatch",
+            &case,
+            &source,
+            &target,
+            &Config::default(),
+            0,
+            true,
+        )
+        .unwrap();
+        records.push(record);
+    }
+    let summary = summarize(&records);
+    // RR is about 0.7 on the whole benchmark; a sample of six under half would be a regression.
+    assert!(summary.registered >= 3, "{records:#?}");
+}

@@ -15,6 +15,7 @@ use crate::se3::{
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
+pub mod pairs;
 pub mod problem;
 pub mod protocol;
 /// Where the team's shared data folder (`problems/`, `data/`) is.
