@@ -5,7 +5,7 @@
 use crate::cloud::{PointCloud, Sampling};
 use crate::config::{Config, Order};
 use crate::error::{Error, Result};
-use crate::features::{candidates, describe, FeatureConfig, Features};
+use crate::features::{describe, FeatureConfig, Features, PairMatches};
 use crate::graph::ViewGraph;
 use crate::interrupt::Interrupt;
 use crate::loss::{CappedDistanceLoss, InlierLoss, Loss};
@@ -346,17 +346,36 @@ impl PreparedProblem {
         target: usize,
         count: usize,
     ) -> Result<Vec<Rigid>> {
+        Ok(match self.pair_matches(source, target, count)? {
+            Some(matches) => candidate_poses(&matches, &self.features_of(source, target)),
+            None => Vec::new(),
+        })
+    }
+
+    /// The descriptor matches of a pair (centred frames), set to return `count` candidates;
+    /// `None` without features.
+    pub(crate) fn pair_matches(
+        &self,
+        source: usize,
+        target: usize,
+        count: usize,
+    ) -> Result<Option<PairMatches>> {
         let Some((config, features)) = &self.features else {
-            return Ok(Vec::new());
+            return Ok(None);
         };
         let config = FeatureConfig {
             num_candidates: count,
             ..config.clone()
         };
-        Ok(candidates(&features[source], &features[target], &config)?
-            .iter()
-            .map(|c| Rigid::from_matrix(&c.t_target_source))
-            .collect())
+        PairMatches::new(&features[source], &features[target], &config).map(Some)
+    }
+
+    /// The features of `source` and `target` (empty without features).
+    pub(crate) fn features_of(&self, source: usize, target: usize) -> [&Features; 2] {
+        match &self.features {
+            Some((_, f)) => [&f[source], &f[target]],
+            None => [&EMPTY_FEATURES, &EMPTY_FEATURES],
+        }
     }
 
     /// `t` (cloud `s` -> cloud `d`, original frames) in the centred frames.
@@ -386,4 +405,22 @@ pub(crate) fn thread_pool(num_threads: usize) -> Result<rayon::ThreadPool> {
         .num_threads(num_threads)
         .build()
         .map_err(|e| Error::InvalidInput(format!("cannot start {num_threads} threads: {e}")))
+}
+
+static EMPTY_FEATURES: Features = Features {
+    points: Vec::new(),
+    normals: Vec::new(),
+    descriptors: Vec::new(),
+};
+
+/// The candidates of a pair's matches as centred poses, best first.
+pub(crate) fn candidate_poses(
+    matches: &PairMatches,
+    [source, target]: &[&Features; 2],
+) -> Vec<Rigid> {
+    matches
+        .candidates(source, target)
+        .iter()
+        .map(|c| Rigid::from_matrix(&c.t_target_source))
+        .collect()
 }

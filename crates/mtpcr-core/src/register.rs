@@ -6,9 +6,11 @@ use crate::cloud::PointCloud;
 use crate::config::{Config, Method};
 use crate::ea::{self, Observer, Outcome, Progress, SearchBox, Tasks};
 use crate::error::{Error, Result};
+use crate::features::PairMatches;
 use crate::interrupt::Interrupt;
 use crate::loss::Loss;
 use crate::multiview::{best_closing_triple, loop_tolerance, register_unordered};
+use crate::problem::candidate_poses;
 use crate::problem::{thread_pool, PreparedProblem};
 use crate::refine::refine_poses;
 use crate::result::{EdgeEstimate, Registration};
@@ -16,7 +18,7 @@ use crate::se3::{
     decode, encode, invert_rigid, rotation_error_deg, translation_error, Individual, Rigid,
     Transform,
 };
-use crate::verdict::{check_edge, judge};
+use crate::verdict::{check_edge, judge, EdgeCheck};
 use rayon::prelude::*;
 use std::ops::ControlFlow;
 use std::time::Instant;
@@ -52,7 +54,25 @@ impl PreparedProblem {
         let mut losses: Vec<&dyn Loss> = aiding.iter().map(|l| l as &dyn Loss).collect();
         losses.extend(original.iter().map(|l| l as &dyn Loss));
         // In the pool: the feature matching runs in parallel and must use `num_threads`.
-        let seeds = pool.install(|| self.seeds(config))?;
+        let matches: Vec<Option<PairMatches>> = pool.install(|| {
+            graph
+                .edges()
+                .par_iter()
+                .map(|e| self.pair_matches(e.source, e.target, config.hypotheses))
+                .collect::<Result<_>>()
+        })?;
+        let hypotheses: Vec<Vec<Rigid>> = pool.install(|| {
+            graph
+                .edges()
+                .par_iter()
+                .zip(&matches)
+                .map(|(e, m)| match m {
+                    Some(m) => candidate_poses(m, &self.features_of(e.source, e.target)),
+                    None => Vec::new(),
+                })
+                .collect()
+        });
+        let seeds = pool.install(|| self.seeds(&hypotheses));
         let tasks = Tasks {
             graph,
             losses,
@@ -74,9 +94,17 @@ impl PreparedProblem {
             kept,
         } = found;
 
-        let evolved: Vec<Rigid> = (0..edges)
+        let mut evolved: Vec<Rigid> = (0..edges)
             .map(|e| Rigid::from_individual(&out.best[edges + e]))
             .collect();
+        if edges == 1 {
+            // A pair: the pose explaining the most feature matches, the evolution's or a
+            // hypothesis (on scenes, the largest overlap often belongs to a wrong pose that
+            // lays floor on floor and wall on wall; the matches tell the places apart).
+            if let Some(m) = &matches[0] {
+                evolved[0] = best_supported(m, evolved[0], &hypotheses[0]);
+            }
+        }
         let (centred, refined_poses) = if config.refine_iterations > 0 {
             let poses = self.refine_centred(&evolved, config.refine_iterations, &pool)?;
             let pairs = graph
@@ -119,7 +147,16 @@ impl PreparedProblem {
             .edges()
             .iter()
             .zip(&centred)
-            .map(|(e, t)| check_edge(self.refine_clouds(), *e, t, self.eps()))
+            .zip(matches.iter().zip(&hypotheses))
+            .map(|((e, t), (m, h))| {
+                let check = check_edge(self.refine_clouds(), *e, t, self.eps());
+                // A pair alone has nothing else to verify it; in a loop, the loop does (an
+                // edge found through the loop may explain fewer matches than a wrong pose).
+                match m {
+                    Some(m) if edges == 1 => with_support(check, m, t, h),
+                    _ => check,
+                }
+            })
             .collect();
         let mut reasons = Vec::new();
         if restarts_run > 1 && !agreed && completed {
@@ -149,27 +186,26 @@ impl PreparedProblem {
         })
     }
 
-    /// Feature hypotheses of every edge, for both of its initial populations, each edge's
-    /// sorted by overlap (the original task's local loss); on the three-view loop, the
-    /// combination that closes the loop first (the paper's loop as a verifier).
-    fn seeds(&self, config: &Config) -> Result<Vec<Vec<Individual>>> {
+    /// Feature hypotheses of every edge (`hypotheses`, centred poses), for both of its
+    /// initial populations, each edge's sorted by overlap (the original task's local loss); on
+    /// the three-view loop, the combination that closes the loop first (the paper's loop as
+    /// a verifier).
+    fn seeds(&self, hypotheses: &[Vec<Rigid>]) -> Vec<Vec<Individual>> {
         let graph = self.graph();
-        // The edges side by side (each one's matching is parallel too, but in small steps
-        // that leave threads idle).
         let mut scored: Vec<Vec<(Transform, f64)>> = graph
             .edges()
             .par_iter()
-            .map(|e| {
+            .zip(hypotheses)
+            .map(|(e, found)| {
                 let loss = self.inlier_loss(e.source, e.target);
-                let mut found: Vec<(Transform, f64)> = self
-                    .hypotheses(e.source, e.target, config.hypotheses)?
+                let mut found: Vec<(Transform, f64)> = found
                     .iter()
                     .map(|r| (r.to_matrix(), 1.0 - loss.evaluate(r)))
                     .collect();
                 found.sort_by(|a, b| b.1.total_cmp(&a.1));
-                Ok(found)
+                found
             })
-            .collect::<Result<_>>()?;
+            .collect();
         if graph.is_ring() && graph.edges().len() == 3 {
             // Edges 0 -> 1, 1 -> 2 and 2 -> 0: T_21 T_10 ~ T_20 = T_02^-1.
             let closing: Vec<(Transform, f64)> = scored[2]
@@ -186,10 +222,10 @@ impl PreparedProblem {
                 }
             }
         }
-        Ok(scored
+        scored
             .iter()
             .map(|list| list.iter().map(|(t, _)| encode(t)).collect())
-            .collect())
+            .collect()
     }
 
     /// Refines given edge transforms (original frames, in edge order; e.g. an earlier result
@@ -309,6 +345,43 @@ impl PreparedProblem {
             })
             .unwrap_or(0);
         self.graph().ring_poses(&t, worst)
+    }
+}
+
+/// Of `evolved` and the `hypotheses` of a pair (centred poses), the one that explains the
+/// most feature matches; `evolved` on a tie.
+fn best_supported(matches: &PairMatches, evolved: Rigid, hypotheses: &[Rigid]) -> Rigid {
+    let support = |r: &Rigid| matches.support(&r.to_matrix());
+    let mut best = (support(&evolved), evolved);
+    for h in hypotheses {
+        let s = support(h);
+        if s > best.0 {
+            best = (s, *h);
+        }
+    }
+    best.1
+}
+
+/// `check` with the feature support of the returned pose `t` and the best support among the
+/// `hypotheses` that are not the same pose (centred poses).
+fn with_support(
+    check: EdgeCheck,
+    matches: &PairMatches,
+    t: &Rigid,
+    hypotheses: &[Rigid],
+) -> EdgeCheck {
+    let t = t.to_matrix();
+    let rival = hypotheses
+        .iter()
+        .map(Rigid::to_matrix)
+        .filter(|h| !matches.same_pose(h, &t))
+        .map(|h| matches.support(&h))
+        .max()
+        .unwrap_or(0);
+    EdgeCheck {
+        support: Some(matches.support(&t)),
+        rival_support: Some(rival),
+        ..check
     }
 }
 

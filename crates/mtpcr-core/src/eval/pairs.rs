@@ -250,6 +250,18 @@ pub struct PairRecord {
     pub confident: bool,
     /// The verdict's reasons (empty when confident).
     pub reasons: Vec<String>,
+    /// The verdict's overlap of the pair ([`crate::verdict::EdgeCheck`]).
+    #[serde(default)]
+    pub overlap: f64,
+    /// The verdict's residual of the pair, relative to eps.
+    #[serde(default)]
+    pub residual: f64,
+    /// Feature matches the estimate explains.
+    #[serde(default)]
+    pub support: Option<usize>,
+    /// The most feature matches a hypothesis that is a different pose explains.
+    #[serde(default)]
+    pub rival_support: Option<usize>,
     /// Seconds of the registration (reading the files excluded).
     pub seconds: f64,
     /// The estimate, rows of the 4x4 matrix (the moved source into the target).
@@ -298,6 +310,7 @@ pub fn run_pair(
     let estimate = result.edges[0].t_target_source;
     let re_deg = rotation_error_deg(&estimate, &truth);
     let te = translation_error(&estimate, &truth);
+    let check = result.verdict.edges.first();
     let record = PairRecord {
         benchmark: benchmark.to_string(),
         pair: key,
@@ -308,6 +321,10 @@ pub fn run_pair(
         registered: re_deg < RE_LIMIT_DEG && te < TE_LIMIT,
         confident: result.verdict.confident,
         reasons: result.verdict.reasons.clone(),
+        overlap: check.map_or(0.0, |c| c.overlap),
+        residual: check.map_or(0.0, |c| c.residual),
+        support: check.and_then(|c| c.support),
+        rival_support: check.and_then(|c| c.rival_support),
         seconds: result.seconds,
         t_target_source: crate::io::matrix_rows(&estimate),
     };
@@ -432,6 +449,10 @@ mod tests {
             registered,
             confident,
             reasons: Vec::new(),
+            overlap: 0.5,
+            residual: 0.1,
+            support: Some(40),
+            rival_support: Some(5),
             seconds: 1.0,
             t_target_source: [[0.0; 4]; 4],
         };

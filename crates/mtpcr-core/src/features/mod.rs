@@ -47,7 +47,7 @@ mod ransac;
 mod tests;
 
 use crate::error::{Error, Result};
-use crate::se3::Transform;
+use crate::se3::{Rigid, Transform};
 
 pub use describe::pca_diagonal;
 
@@ -327,23 +327,67 @@ pub fn candidates(
     target: &Features,
     config: &FeatureConfig,
 ) -> Result<Vec<Candidate>> {
-    config.validate()?;
-    for (name, f) in [("source", source), ("target", target)] {
-        if f.normals.len() != f.points.len() || f.descriptors.len() != f.points.len() {
-            return Err(Error::InvalidInput(format!(
-                "{name} features: {} points, {} normals, {} descriptors (must be equal)",
-                f.points.len(),
-                f.normals.len(),
-                f.descriptors.len()
-            )));
+    let matches = PairMatches::new(source, target, config)?;
+    Ok(matches.candidates(source, target))
+}
+
+/// The descriptor matches of a pair of described clouds: what [`candidates`] searches, kept
+/// to measure how many of them any pose explains (its support), the same score that ranks
+/// the candidates. A true pose of real scans explains many more matches than any other
+/// pose; a pair whose best poses explain about as many is ambiguous.
+pub struct PairMatches {
+    set: ransac::PairMatchSet,
+    config: FeatureConfig,
+}
+
+impl PairMatches {
+    /// Matches the descriptors of `source` and `target` (see [`candidates`] for `config`
+    /// and the errors).
+    pub fn new(
+        source: &Features,
+        target: &Features,
+        config: &FeatureConfig,
+    ) -> Result<PairMatches> {
+        config.validate()?;
+        for (name, f) in [("source", source), ("target", target)] {
+            if f.normals.len() != f.points.len() || f.descriptors.len() != f.points.len() {
+                return Err(Error::InvalidInput(format!(
+                    "{name} features: {} points, {} normals, {} descriptors (must be equal)",
+                    f.points.len(),
+                    f.normals.len(),
+                    f.descriptors.len()
+                )));
+            }
+            let finite = |v: &[[f64; 3]]| v.iter().flatten().all(|c| c.is_finite());
+            let finite_descriptors = f.descriptors.iter().flatten().all(|c| c.is_finite());
+            if !(finite(&f.points) && finite(&f.normals) && finite_descriptors) {
+                return Err(Error::InvalidInput(format!(
+                    "{name} features hold a non-finite value"
+                )));
+            }
         }
-        let finite = |v: &[[f64; 3]]| v.iter().flatten().all(|c| c.is_finite());
-        let finite_descriptors = f.descriptors.iter().flatten().all(|c| c.is_finite());
-        if !(finite(&f.points) && finite(&f.normals) && finite_descriptors) {
-            return Err(Error::InvalidInput(format!(
-                "{name} features hold a non-finite value"
-            )));
-        }
+        Ok(PairMatches {
+            set: ransac::match_pair(source, target, config),
+            config: config.clone(),
+        })
     }
-    Ok(ransac::candidates(source, target, config))
+
+    /// [`candidates`] from these matches (`source` and `target` as given to
+    /// [`PairMatches::new`]).
+    pub fn candidates(&self, source: &Features, target: &Features) -> Vec<Candidate> {
+        ransac::candidates(&self.set, source, target, &self.config)
+    }
+
+    /// Matches that `t_target_source` maps within half the inlier distance, their normals
+    /// agreeing ([`Candidate::matches`] of a pose).
+    pub fn support(&self, t_target_source: &Transform) -> usize {
+        self.set.support(&Rigid::from_matrix(t_target_source))
+    }
+
+    /// Are two poses the same candidate (within [`FeatureConfig::nms_angle_deg`] and
+    /// [`FeatureConfig::nms_distance`] of each other)?
+    pub fn same_pose(&self, a: &Transform, b: &Transform) -> bool {
+        self.set
+            .same(&Rigid::from_matrix(a), &Rigid::from_matrix(b), &self.config)
+    }
 }

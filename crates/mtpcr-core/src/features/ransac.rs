@@ -87,28 +87,62 @@ impl Matched {
     }
 }
 
+/// The descriptor matches of a pair, with what [`support`] needs.
+pub(super) struct PairMatchSet {
+    matched: Matched,
+    /// Source keypoint centroid: where two poses are compared ([`similar`]).
+    centre: [f64; 3],
+}
+
+/// Matches the features of a pair as `config.matching` says.
+pub(super) fn match_pair(
+    source: &Features,
+    target: &Features,
+    config: &FeatureConfig,
+) -> PairMatchSet {
+    let pairs = if source.len() < 3 || target.len() < 3 {
+        Vec::new()
+    } else {
+        match_descriptors(&source.descriptors, &target.descriptors, config.matching)
+    };
+    PairMatchSet {
+        matched: Matched::new(&pairs, source, target, config),
+        centre: mean(&source.points),
+    }
+}
+
+impl PairMatchSet {
+    /// Matches that `pose` maps within half the inlier distance, normals agreeing (the
+    /// ranking score of the candidates, [`Candidate::matches`]).
+    pub(super) fn support(&self, pose: &Rigid) -> usize {
+        self.matched.count(pose, self.matched.d2 / 4.0)
+    }
+
+    /// Are `a` and `b` the same candidate ([`FeatureConfig::nms_angle_deg`] and
+    /// [`FeatureConfig::nms_distance`])?
+    pub(super) fn same(&self, a: &Rigid, b: &Rigid, config: &FeatureConfig) -> bool {
+        similar(a, b, &self.centre, config)
+    }
+}
+
 pub(super) fn candidates(
+    set: &PairMatchSet,
     source: &Features,
     target: &Features,
     config: &FeatureConfig,
 ) -> Vec<Candidate> {
-    if source.len() < 3 || target.len() < 3 {
+    let matched = &set.matched;
+    if matched.len() < 3 {
         return Vec::new();
     }
-    let pairs = match_descriptors(&source.descriptors, &target.descriptors, config.matching);
-    if pairs.len() < 3 {
-        return Vec::new();
-    }
-    let matched = Matched::new(&pairs, source, target, config);
-    let centre = mean(&source.points);
-    let same = |a: &Rigid, b: &Rigid| similar(a, b, &centre, config);
-    let pool = search(&matched, config, &same);
+    let same = |a: &Rigid, b: &Rigid| set.same(a, b, config);
+    let pool = search(matched, config, &same);
     let Ok(tree) = ImmutableKdTree::<f64, 3>::new_from_slice(&target.points) else {
         return Vec::new();
     };
     let mut refined: Vec<Candidate> = pool
         .par_iter()
-        .map(|h| refine(h.pose, &matched, source, target, &tree, config))
+        .map(|h| refine(h.pose, matched, source, target, &tree, config))
         .collect::<Vec<_>>()
         .into_iter()
         .flatten()

@@ -401,3 +401,25 @@ fn the_default_setting_uses_the_measured_voxel_fraction() {
         DEFAULT_VOXEL_FRACTION
     );
 }
+
+#[test]
+fn features_support_is_the_candidates_score_and_the_truth_has_the_most() {
+    let problem = three_views(4, 8000);
+    let clouds: Vec<&[[f64; 3]]> = problem.clouds.iter().map(|c| c.points()).collect();
+    let config = FeatureConfig::for_clouds(&clouds, DEFAULT_VOXEL_FRACTION).unwrap();
+    let (a, b) = (
+        describe(clouds[0], &config).unwrap(),
+        describe(clouds[1], &config).unwrap(),
+    );
+    let matches = PairMatches::new(&a, &b, &config).unwrap();
+    let found = matches.candidates(&a, &b);
+    assert!(!found.is_empty());
+    for c in &found {
+        assert_eq!(matches.support(&c.t_target_source), c.matches);
+    }
+    let truth = problem.ground_truth[0];
+    let wrong = truth * decode(&[0.0, 0.0, 30.0, 0.0, 0.0, 0.0]);
+    assert!(matches.same_pose(&truth, &found[0].t_target_source));
+    assert!(!matches.same_pose(&truth, &wrong));
+    assert!(matches.support(&truth) > 10 * matches.support(&wrong).max(1));
+}
