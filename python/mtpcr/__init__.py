@@ -24,6 +24,15 @@ be read or written, ``RuntimeError`` for anything else.
 
 The engine is Rust (``mtpcr._mtpcr``); it runs without holding the GIL.
 
+Benchmarks against ground truth: ``mtpcr.evaluate(suite, problem_files)`` runs an experiment
+suite of the paper (the records of ``mtpcr experiment``); ``mtpcr.evaluate_pairs(folder,
+pairs=20)`` runs the pairs of a 3DMatch-layout benchmark (``gt.log`` per scene: 3DMatch,
+3DLoMatch) as ``mtpcr eval FOLDER`` does, and returns the records and their summary
+(registration recall, RE, TE, the verdict's confusion)::
+
+    report = mtpcr.evaluate_pairs("shared/data/3dmatch/benchmarks/3DMatch", pairs=20, seed=0)
+    print(report["summary"]["recall"], report["records"][0]["pair"])
+
 Many registrations, or the experiment suites, on Ray (this machine or a cluster):
 ``mtpcr.distributed`` (``pip install "mtpcr[ray]"``; not imported by ``import mtpcr``).
 """
@@ -37,6 +46,7 @@ from ._mtpcr import (
     __version__,
     describe_suite,
     evaluate,
+    evaluate_pairs,
     find_shared_dir,
     load_problem,
     read_ply,
@@ -55,6 +65,7 @@ __all__ = [
     "__version__",
     "describe_suite",
     "evaluate",
+    "evaluate_pairs",
     "find_shared_dir",
     "load_problem",
     "read_ply",

@@ -375,6 +375,41 @@ def evaluate(
     ``"sharing"``, ``"sampling"``) on problem files: one record per run, the same as the
     lines ``mtpcr experiment`` writes to ``runs.jsonl``."""
 
+def evaluate_pairs(
+    benchmark: _Path,
+    *,
+    pairs: int | None = None,
+    scenes: list[str] | None = None,
+    seed: int | None = None,
+    moved: bool = False,
+    data_root: _Path | None = None,
+    config: Config | None = None,
+    on_pair: Callable[[dict[str, Any]], bool | None] | None = None,
+    **settings: Any,
+) -> dict[str, Any]:
+    """Runs the pairs of a pair benchmark folder in the 3DMatch layout (one folder per scene
+    with a ``gt.log``: 3DMatch, 3DLoMatch; or one scene's folder) as ``mtpcr eval FOLDER``
+    does: each pair registered with no initial guess and scored against ``gt.log``
+    (registered when RE < 15 degrees and TE < 0.3).
+
+    Returns ``{"benchmark": name, "records": [...], "summary": {...}}``: one record per pair
+    in the benchmark's order (the lines of ``mtpcr eval --records``: ``benchmark``, ``pair``
+    (``scene/target-source``), ``seed``, ``moved``, ``re_deg``, ``te``, ``registered``,
+    ``confident``, ``reasons``, ``overlap``, ``residual``, ``support``, ``rival_support``,
+    ``seconds``, ``t_target_source``) and their summary (``pairs``, ``registered``,
+    ``recall`` in percent, ``re_deg`` and ``te`` over the registered pairs or None,
+    ``median_seconds``, ``failed``, ``failed_confident``, ``registered_doubted``).
+
+    ``pairs``: a seeded sample of that many pairs (default all); ``scenes``: only scenes
+    whose name contains one of these; ``seed`` (default: the config's, else 0) seeds the
+    sample and the runs; ``moved``: each source moved by a seeded rigid motion first;
+    ``data_root`` holds ``<scene>/cloud_bin_<k>.ply`` (default: the folder's grandparent).
+    Settings are ``Config`` fields as keywords, over ``config``. ``on_pair(record)`` is
+    called after each pair; returning False stops (the records so far are returned). A
+    missing folder raises ``FileNotFoundError``, a folder that is not a benchmark
+    ``ValueError``.
+    """
+
 def describe_suite(suite: str) -> dict[str, Any]:
     """What an experiment suite runs: ``name``, ``default_runs``, ``paper_problems`` (problem
     names, or None for every problem) and ``variants`` in run order (dicts with ``key``,

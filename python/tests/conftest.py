@@ -12,6 +12,7 @@ rigid motion. About 60-80 % of a view's points lie on its neighbour in the loop.
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -127,6 +128,15 @@ def shared_dir() -> Path:
             "no shared data found (set MTPCR_SHARED_DIR to the folder holding problems/ and data/)"
         )
     return Path(found)
+
+
+def mtpcr_binary() -> Path:
+    """The ``mtpcr`` command (``$MTPCR_BIN``, else ``target/release/mtpcr``); skips the calling
+    test, with the reason, when it is not built."""
+    binary = Path(os.environ.get("MTPCR_BIN", REPO_ROOT / "target" / "release" / "mtpcr"))
+    if not binary.is_file():
+        pytest.skip(f"no mtpcr binary at {binary} (cargo build --release, or set MTPCR_BIN)")
+    return binary
 
 
 @pytest.fixture(scope="module")

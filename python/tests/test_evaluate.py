@@ -4,22 +4,13 @@ suite, variant, problem and seed (only the run time differs)."""
 from __future__ import annotations
 
 import json
-import os
 import subprocess
-from pathlib import Path
 
 import pytest
 
 import mtpcr
 
-from conftest import REPO_ROOT
-
-
-def mtpcr_binary() -> Path:
-    binary = Path(os.environ.get("MTPCR_BIN", REPO_ROOT / "target" / "release" / "mtpcr"))
-    if not binary.is_file():
-        pytest.skip(f"no mtpcr binary at {binary} (cargo build --release, or set MTPCR_BIN)")
-    return binary
+from conftest import mtpcr_binary
 
 
 def test_evaluate_gives_the_records_of_mtpcr_experiment(problem_file, tmp_path):

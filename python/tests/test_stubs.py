@@ -124,6 +124,7 @@ def test_config_property_docs_are_the_rust_field_docs(stub):
         "write_ply",
         "load_problem",
         "evaluate",
+        "evaluate_pairs",
         "find_shared_dir",
     ],
 )

@@ -6,10 +6,10 @@ use crate::error::{outln, CliResult, Failure};
 use crate::progress;
 use crate::settings::{self, RunArgs};
 use mtpcr_core::eval::pairs::{
-    run_pair, summarize, FragmentCache, PairBenchmark, PairRecord, PairSummary,
+    run_benchmark, summarize, PairBenchmark, PairRecord, PairStep, PairSummary,
 };
-use std::collections::HashMap;
 use std::io::Write;
+use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 
 /// The options of `mtpcr eval` that apply to pair benchmarks.
@@ -32,11 +32,6 @@ pub struct PairArgs {
     pub records: Option<PathBuf>,
 }
 
-/// A record's identity in a records file.
-fn record_key(r: &PairRecord) -> (String, String, u64, bool) {
-    (r.benchmark.clone(), r.pair.clone(), r.seed, r.moved)
-}
-
 /// The records already in `path` (none when it does not exist).
 fn read_records(path: &Path) -> CliResult<Vec<PairRecord>> {
     let text = match std::fs::read_to_string(path) {
@@ -57,6 +52,30 @@ fn read_records(path: &Path) -> CliResult<Vec<PairRecord>> {
             })
         })
         .collect()
+}
+
+/// Appends `record` as one JSON line.
+fn append_record(f: &mut std::fs::File, record: &PairRecord) -> CliResult<()> {
+    let line = serde_json::to_string(record)
+        .map_err(|e| Failure(format!("cannot serialise a record: {e}")))?;
+    writeln!(f, "{line}").map_err(|e| Failure(format!("records file: {e}")))
+}
+
+/// A pair's outcome on one line: `scene/i-j: ok   RE 1.01 deg TE 0.039, confident, 0.20 s`.
+fn record_line(record: &PairRecord) -> String {
+    format!(
+        "{}: {} RE {:.2} deg TE {:.3}, {}, {:.2} s",
+        record.pair,
+        if record.registered { "ok  " } else { "FAIL" },
+        record.re_deg,
+        record.te,
+        if record.confident {
+            "confident"
+        } else {
+            "doubted"
+        },
+        record.seconds
+    )
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -99,7 +118,6 @@ pub fn eval_pairs(
         Some(p) => read_records(p)?,
         None => Vec::new(),
     };
-    let done: HashMap<_, PairRecord> = earlier.into_iter().map(|r| (record_key(&r), r)).collect();
     let mut out = match &args.records {
         Some(p) => Some(
             std::fs::OpenOptions::new()
@@ -114,45 +132,39 @@ pub fn eval_pairs(
     let bar = progress::run_bar(total, run.quiet, "pairs");
     let mut tables = Vec::new();
     for b in &benchmarks {
-        let mut cache = FragmentCache::default();
-        let mut records: Vec<(String, PairRecord)> = Vec::new();
-        for case in &b.cases {
-            let key = (b.name.clone(), case.key(), seed, args.moved);
-            if let Some(r) = done.get(&key) {
-                records.push((case.scene.clone(), r.clone()));
-                bar.inc(1);
-                continue;
-            }
-            bar.set_message(format!("{} {}", b.name, case.key()));
-            let source = cache.get(b, &case.scene, case.source)?.clone();
-            let target = cache.get(b, &case.scene, case.target)?;
-            let (record, _) = run_pair(&b.name, case, &source, target, &config, seed, args.moved)?;
-            if let Some(f) = out.as_mut() {
-                let line = serde_json::to_string(&record)
-                    .map_err(|e| Failure(format!("cannot serialise a record: {e}")))?;
-                writeln!(f, "{line}").map_err(|e| Failure(format!("records file: {e}")))?;
-            }
-            if !run.quiet {
-                bar.suspend(|| {
-                    eprintln!(
-                        "{} {}: {} RE {:.2} deg TE {:.3}, {}, {:.2} s",
-                        b.name,
-                        record.pair,
-                        if record.registered { "ok  " } else { "FAIL" },
-                        record.re_deg,
-                        record.te,
-                        if record.confident {
-                            "confident"
-                        } else {
-                            "doubted"
-                        },
-                        record.seconds
-                    )
-                });
+        // A records file that cannot be written stops the run with the error.
+        let mut failure = None;
+        let records = run_benchmark(b, &config, seed, args.moved, &earlier, &mut |step| {
+            let (record, reused) = match step {
+                PairStep::Running(case) => {
+                    bar.set_message(format!("{} {}", b.name, case.key()));
+                    return ControlFlow::Continue(());
+                }
+                PairStep::Done { record, reused } => (record, reused),
+            };
+            if !reused {
+                if let Some(f) = out.as_mut() {
+                    if let Err(e) = append_record(f, record) {
+                        failure = Some(e);
+                        return ControlFlow::Break(());
+                    }
+                }
+                if !run.quiet {
+                    bar.suspend(|| eprintln!("{} {}", b.name, record_line(record)));
+                }
             }
             bar.inc(1);
-            records.push((case.scene.clone(), record));
+            ControlFlow::Continue(())
+        })?;
+        if let Some(e) = failure {
+            return Err(e);
         }
+        let records: Vec<(String, PairRecord)> = b
+            .cases
+            .iter()
+            .map(|c| c.scene.clone())
+            .zip(records)
+            .collect();
         tables.push((b.name.clone(), records));
     }
     bar.finish_and_clear();

@@ -71,7 +71,8 @@ fn bunny_a_is_registered_within_five_degrees() {
     ignore = "needs ../shared (or MTPCR_SHARED_DIR), not found at build time"
 )]
 fn most_of_a_sample_of_3dmatch_pairs_is_registered() {
-    use mtpcr_core::eval::pairs::{run_pair, summarize, FragmentCache, PairBenchmark};
+    use mtpcr_core::eval::pairs::{run_benchmark, summarize, PairBenchmark};
+    use std::ops::ControlFlow;
     let dir = common::shared_dir().join("data/3dmatch/benchmarks/3DMatch");
     let mut benchmark = PairBenchmark::load(&dir, None).unwrap_or_else(|e| panic!("{e}"));
     assert!(
@@ -80,29 +81,11 @@ fn most_of_a_sample_of_3dmatch_pairs_is_registered() {
         benchmark.cases.len()
     );
     benchmark.sample(6, 3);
-    let mut cache = FragmentCache::default();
-    let mut records = Vec::new();
-    for case in benchmark.cases.clone() {
-        let target = cache
-            .get(&benchmark, &case.scene, case.target)
-            .unwrap()
-            .clone();
-        let source = cache
-            .get(&benchmark, &case.scene, case.source)
-            .unwrap()
-            .clone();
-        let (record, _) = run_pair(
-            "3DMatch",
-            &case,
-            &source,
-            &target,
-            &Config::default(),
-            0,
-            true,
-        )
-        .unwrap();
-        records.push(record);
-    }
+    let records = run_benchmark(&benchmark, &Config::default(), 0, true, &[], &mut |_| {
+        ControlFlow::Continue(())
+    })
+    .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(records.len(), 6);
     let summary = summarize(&records);
     // RR is about 0.7 on the whole benchmark; a sample of six under half would be a regression.
     assert!(summary.registered >= 3, "{records:#?}");

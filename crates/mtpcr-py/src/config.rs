@@ -53,6 +53,22 @@ pub(crate) fn apply_settings(
     })
 }
 
+/// The `config` argument of a function: an `mtpcr.Config`, or `None` (or absent) for
+/// `Config()`; anything else is a `TypeError`.
+pub(crate) fn base_config(config: Option<&Bound<'_, PyAny>>) -> PyResult<Config> {
+    match config {
+        None => Ok(Config::default()),
+        Some(c) if c.is_none() => Ok(Config::default()),
+        Some(c) => match c.cast::<PyConfig>() {
+            Ok(c) => Ok(c.get().inner.clone()),
+            Err(_) => Err(PyTypeError::new_err(format!(
+                "config must be an mtpcr.Config, got {}",
+                c.get_type().name()?
+            ))),
+        },
+    }
+}
+
 /// `**kwargs` as (name, value) pairs.
 pub(crate) fn kwargs_pairs<'py>(
     kwargs: Option<&Bound<'py, PyDict>>,

@@ -1,14 +1,30 @@
 //! `evaluate()`: the experiment protocol of `mtpcr experiment` (`mtpcr_core::eval::protocol`)
-//! from Python, record for record; and `find_shared_dir()`.
+//! from Python, record for record; `evaluate_pairs()`: the pair benchmarks of `mtpcr eval
+//! FOLDER` (`mtpcr_core::eval::pairs`); and `find_shared_dir()`.
 
+use crate::config::{apply_settings, base_config, kwargs_pairs};
 use crate::convert::json_text_to_py;
 use crate::errors::to_py;
+use mtpcr_core::eval::pairs::{run_benchmark, summarize, PairBenchmark, PairStep};
 use mtpcr_core::eval::problem::Problem;
 use mtpcr_core::eval::protocol::{run_one, Suite};
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
+use std::ops::ControlFlow;
 use std::path::PathBuf;
+
+/// A serde value (a record, a summary) as the dict Python's `json` reads from it (NaN and
+/// infinities become `None`).
+fn serde_to_py<'py>(
+    py: Python<'py>,
+    value: &impl serde::Serialize,
+    what: &str,
+) -> PyResult<Bound<'py, PyAny>> {
+    let text =
+        serde_json::to_string(value).map_err(|e| PyValueError::new_err(format!("{what}: {e}")))?;
+    json_text_to_py(py, &text)
+}
 
 /// Runs an experiment suite of the paper (``"accuracy"``, ``"quality"``, ``"noise"``,
 /// ``"alpha"``, ``"sharing"``, ``"sampling"``) on problem files and returns one dict per run,
@@ -87,9 +103,7 @@ pub(crate) fn evaluate<'py>(
                         )
                     })
                     .map_err(to_py)?;
-                let text = serde_json::to_string(&record)
-                    .map_err(|e| PyValueError::new_err(format!("record: {e}")))?;
-                let dict = json_text_to_py(py, &text)?.cast_into::<PyDict>()?;
+                let dict = serde_to_py(py, &record, "record")?.cast_into::<PyDict>()?;
                 records.push(dict.clone());
                 py.check_signals()?;
                 if let Some(f) = &on_run {
@@ -102,6 +116,119 @@ pub(crate) fn evaluate<'py>(
         }
     }
     Ok(records)
+}
+
+/// Runs the pairs of a pair benchmark folder in the 3DMatch layout (3DMatch, 3DLoMatch: one
+/// folder per scene with a ``gt.log``; or one scene's folder), as ``mtpcr eval FOLDER``
+/// does: every pair registered with no initial guess and scored against ``gt.log``
+/// (registered when RE < 15 degrees and TE < 0.3), the same numbers as the CLI for the same
+/// settings, pairs and seed (only ``seconds`` differs).
+///
+/// Returns ``{"benchmark": name, "records": [...], "summary": {...}}``: one record per pair
+/// in the benchmark's order (the fields of the CLI's ``--records`` lines: ``benchmark``,
+/// ``pair`` (``scene/target-source``), ``seed``, ``moved``, ``re_deg``, ``te``,
+/// ``registered``, ``confident``, ``reasons``, ``overlap``, ``residual``, ``support``,
+/// ``rival_support``, ``seconds``, ``t_target_source`` (4x4 rows)), and their summary:
+/// ``pairs``, ``registered``, ``recall`` (percent), ``re_deg`` and ``te`` (means over the
+/// registered pairs, ``None`` when there are none), ``median_seconds``, ``failed``,
+/// ``failed_confident``, ``registered_doubted``.
+///
+/// ``pairs`` runs a seeded sample of that many pairs (the same pairs for the same seed;
+/// default every pair); ``scenes`` keeps the scenes whose folder name contains one of these
+/// strings. ``seed`` seeds the sample and every registration (default: the config's seed,
+/// else 0). ``moved`` moves each source fragment by a seeded random rigid motion first.
+/// Fragments are read from ``data_root/<scene>/cloud_bin_<k>.ply`` (default: the benchmark
+/// folder's grandparent). Settings are ``Config`` fields as keywords, over ``config``
+/// (default ``Config()``), as for :func:`register`.
+///
+/// ``on_pair(record)`` is called after each pair; returning ``False`` stops the evaluation
+/// (the records so far are returned), ``None`` or ``True`` continues; an exception in it
+/// stops it and propagates. The GIL is released while a pair runs; Ctrl-C is noticed
+/// between pairs. A missing folder raises ``FileNotFoundError``; a folder with no ``gt.log``,
+/// a malformed ``gt.log`` or no matching scene ``ValueError``; an unreadable fragment
+/// ``OSError``.
+#[pyfunction]
+#[pyo3(signature = (benchmark, *, pairs=None, scenes=None, seed=None, moved=false, data_root=None, config=None, on_pair=None, **settings))]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn evaluate_pairs<'py>(
+    py: Python<'py>,
+    benchmark: PathBuf,
+    pairs: Option<usize>,
+    scenes: Option<Vec<String>>,
+    seed: Option<u64>,
+    moved: bool,
+    data_root: Option<PathBuf>,
+    config: Option<&Bound<'py, PyAny>>,
+    on_pair: Option<Bound<'py, PyAny>>,
+    settings: Option<&Bound<'py, PyDict>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let base = base_config(config)?;
+    let mut config = apply_settings(&base, &kwargs_pairs(settings)?, "evaluate_pairs")?;
+    let on_pair: Option<Py<PyAny>> = match on_pair {
+        Some(f) if !f.is_none() => {
+            if !f.is_callable() {
+                return Err(PyTypeError::new_err(format!(
+                    "on_pair must be callable, got {}",
+                    f.get_type().name()?
+                )));
+            }
+            Some(f.unbind())
+        }
+        _ => None,
+    };
+    if pairs == Some(0) {
+        return Err(PyValueError::new_err("pairs must be at least 1"));
+    }
+    let seed = seed.or(config.seed).unwrap_or(0);
+    config.seed = None;
+    let mut bench = py
+        .detach(|| PairBenchmark::load(&benchmark, data_root.as_deref()))
+        .map_err(to_py)?;
+    bench
+        .retain_scenes(&scenes.unwrap_or_default())
+        .map_err(to_py)?;
+    if let Some(n) = pairs {
+        bench.sample(n, seed);
+    }
+    // The pairs run without the GIL; it is taken after each pair to hand its record over.
+    let mut records: Vec<Py<PyAny>> = Vec::with_capacity(bench.cases.len());
+    let mut failure: Option<PyErr> = None;
+    let outcome = py.detach(|| {
+        run_benchmark(&bench, &config, seed, moved, &[], &mut |step| {
+            let PairStep::Done { record, .. } = step else {
+                return ControlFlow::Continue(());
+            };
+            let go_on = Python::attach(|py| -> PyResult<bool> {
+                let dict = serde_to_py(py, record, "record")?;
+                records.push(dict.clone().unbind());
+                py.check_signals()?;
+                match &on_pair {
+                    Some(f) => {
+                        let answer = f.bind(py).call1((dict,))?;
+                        Ok(answer.is_none() || answer.is_truthy()?)
+                    }
+                    None => Ok(true),
+                }
+            });
+            match go_on {
+                Ok(true) => ControlFlow::Continue(()),
+                Ok(false) => ControlFlow::Break(()),
+                Err(e) => {
+                    failure = Some(e);
+                    ControlFlow::Break(())
+                }
+            }
+        })
+    });
+    if let Some(e) = failure {
+        return Err(e);
+    }
+    let done = outcome.map_err(to_py)?;
+    let result = PyDict::new(py);
+    result.set_item("benchmark", &bench.name)?;
+    result.set_item("records", records)?;
+    result.set_item("summary", serde_to_py(py, &summarize(&done), "summary")?)?;
+    Ok(result)
 }
 
 /// What an experiment suite runs: ``name``, ``default_runs`` (seeds ``0..default_runs``

@@ -48,6 +48,7 @@ fn _mtpcr(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(files::write_ply, m)?)?;
     m.add_function(wrap_pyfunction!(files::load_problem, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate::evaluate, m)?)?;
+    m.add_function(wrap_pyfunction!(evaluate::evaluate_pairs, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate::find_shared_dir, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate::describe_suite, m)?)?;
     Ok(())

@@ -1,6 +1,6 @@
 //! `register()` and its result class.
 
-use crate::config::{apply_settings, config_to_dict, kwargs_pairs, PyConfig};
+use crate::config::{apply_settings, base_config, config_to_dict, kwargs_pairs};
 use crate::convert::{
     cloud_from_py, points_from_py, points_to_py, transform_to_py, transforms_to_py,
 };
@@ -85,19 +85,7 @@ pub(crate) fn register(
     config: Option<&Bound<'_, PyAny>>,
     settings: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<PyRegistration> {
-    let base: Config = match config {
-        None => Config::default(),
-        Some(c) if c.is_none() => Config::default(),
-        Some(c) => match c.cast::<PyConfig>() {
-            Ok(c) => c.get().inner.clone(),
-            Err(_) => {
-                return Err(PyTypeError::new_err(format!(
-                    "config must be an mtpcr.Config, got {}",
-                    c.get_type().name()?
-                )))
-            }
-        },
-    };
+    let base = base_config(config)?;
     let mut pairs = kwargs_pairs(settings)?;
     if let Some(seed) = seed {
         if !seed.is_none() {

@@ -3,7 +3,8 @@
 //! scored as in the literature (PointDSC, SC2-PCR, MAC): a pair is registered when its
 //! rotation error is under [`RE_LIMIT_DEG`] and its translation error under [`TE_LIMIT`];
 //! registration recall (RR) is the fraction of registered pairs, RE and TE are the mean
-//! errors over the registered pairs.
+//! errors over the registered pairs. [`run_benchmark`] runs a benchmark's pairs (resuming
+//! from done records) for the front-ends (`mtpcr eval FOLDER`, `mtpcr.evaluate_pairs`).
 //!
 //! Layout: a benchmark folder holds one folder per scene with a `gt.log` (blocks of five
 //! lines, `i j n` then the 4x4 `T` with `x_i = T x_j`), and the fragments are
@@ -20,6 +21,8 @@ use crate::se3::{invert_rigid, random_rigid, rotation_error_deg, translation_err
 use crate::verdict::Verdict;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
+use std::collections::HashMap;
+use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 
 /// A pair is registered when its rotation error is under this (degrees)...
@@ -98,6 +101,8 @@ impl PairBenchmark {
     /// folder (of the scene's benchmark folder when `dir` is one scene).
     pub fn load(dir: impl AsRef<Path>, data_root: Option<&Path>) -> Result<PairBenchmark> {
         let dir = dir.as_ref();
+        // A missing folder is said to be missing, not to hold no gt.log.
+        std::fs::metadata(dir).map_err(|e| Error::io(dir, e))?;
         let logs = scene_logs(dir);
         if logs.is_empty() {
             return Err(Error::InvalidInput(format!(
@@ -407,6 +412,67 @@ impl FragmentCache {
     }
 }
 
+/// What [`run_benchmark`] tells its caller, pair by pair.
+#[derive(Clone, Copy, Debug)]
+pub enum PairStep<'a> {
+    /// This pair is about to be registered.
+    Running(&'a PairCase),
+    /// A pair's record: registered just now, or (`reused`) taken from the done records.
+    Done {
+        /// The record.
+        record: &'a PairRecord,
+        /// Taken from the done records, not run.
+        reused: bool,
+    },
+}
+
+/// Runs the pairs of `benchmark` in order with `seed` (and `moved`, see [`run_pair`]),
+/// reading the fragments once per scene, and returns their records in case order. A pair
+/// whose record is in `done` (same benchmark name, pair, seed and `moved`; the last one
+/// when several) is not run: that record is used. `on_step` hears of every pair before it
+/// runs and of every record; [`ControlFlow::Break`] stops the run there, and the records
+/// so far are returned.
+pub fn run_benchmark(
+    benchmark: &PairBenchmark,
+    config: &Config,
+    seed: u64,
+    moved: bool,
+    done: &[PairRecord],
+    on_step: &mut dyn FnMut(PairStep<'_>) -> ControlFlow<()>,
+) -> Result<Vec<PairRecord>> {
+    let done: HashMap<&str, &PairRecord> = done
+        .iter()
+        .filter(|r| r.benchmark == benchmark.name && r.seed == seed && r.moved == moved)
+        .map(|r| (r.pair.as_str(), r))
+        .collect();
+    let mut cache = FragmentCache::default();
+    let mut records = Vec::with_capacity(benchmark.cases.len());
+    for case in &benchmark.cases {
+        let (record, reused) = match done.get(case.key().as_str()) {
+            Some(&r) => (r.clone(), true),
+            None => {
+                if on_step(PairStep::Running(case)).is_break() {
+                    break;
+                }
+                let source = cache.get(benchmark, &case.scene, case.source)?.clone();
+                let target = cache.get(benchmark, &case.scene, case.target)?;
+                let (record, _) =
+                    run_pair(&benchmark.name, case, &source, target, config, seed, moved)?;
+                (record, false)
+            }
+        };
+        records.push(record);
+        let step = PairStep::Done {
+            record: &records[records.len() - 1],
+            reused,
+        };
+        if on_step(step).is_break() {
+            break;
+        }
+    }
+    Ok(records)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -467,6 +533,120 @@ mod tests {
         assert_eq!((s.failed_confident, s.registered_doubted), (1, 1));
         assert!((s.recall - 50.0).abs() < 1e-12);
         assert!((s.re_deg - 2.0).abs() < 1e-12);
+    }
+
+    fn record(benchmark: &str, pair: &str, seed: u64, moved: bool) -> PairRecord {
+        PairRecord {
+            benchmark: benchmark.into(),
+            pair: pair.into(),
+            seed,
+            moved,
+            re_deg: 1.0,
+            te: 0.1,
+            registered: true,
+            confident: true,
+            reasons: Vec::new(),
+            overlap: 0.5,
+            residual: 0.1,
+            support: None,
+            rival_support: None,
+            seconds: 1.0,
+            t_target_source: [[0.0; 4]; 4],
+        }
+    }
+
+    /// Three pairs of scene `s` whose fragments are nowhere: any pair that is run fails
+    /// reading its fragment.
+    fn fragmentless_benchmark() -> PairBenchmark {
+        let case = |target, source| PairCase {
+            scene: "s".into(),
+            source,
+            target,
+            t_target_source: Transform::identity(),
+        };
+        PairBenchmark {
+            name: "B".into(),
+            data_root: PathBuf::from("/nonexistent/mtpcr-fragments"),
+            cases: vec![case(0, 1), case(0, 2), case(1, 2)],
+        }
+    }
+
+    #[test]
+    fn run_benchmark_reuses_the_done_records_of_the_same_benchmark_seed_and_motion() {
+        let b = fragmentless_benchmark();
+        let mut done = vec![
+            record("B", "s/1-2", 4, false),
+            record("B", "s/0-1", 4, false),
+            record("B", "s/0-2", 4, false),
+        ];
+        let mut heard = Vec::new();
+        let records = run_benchmark(&b, &Config::default(), 4, false, &done, &mut |step| {
+            match step {
+                PairStep::Running(case) => heard.push(format!("running {}", case.key())),
+                PairStep::Done { record, reused, .. } => {
+                    heard.push(format!("{} {reused}", record.pair))
+                }
+            }
+            ControlFlow::Continue(())
+        })
+        .expect("every pair is done: no fragment is read");
+        let pairs: Vec<&str> = records.iter().map(|r| r.pair.as_str()).collect();
+        assert_eq!(pairs, ["s/0-1", "s/0-2", "s/1-2"], "case order");
+        assert_eq!(heard, ["s/0-1 true", "s/0-2 true", "s/1-2 true"]);
+
+        // Break on the first record: only it is returned.
+        let first = run_benchmark(&b, &Config::default(), 4, false, &done, &mut |_| {
+            ControlFlow::Break(())
+        })
+        .unwrap();
+        assert_eq!(first.len(), 1);
+
+        // Another seed, motion or benchmark is not the same run: the pair is run (and here
+        // fails reading its fragment, which names the file).
+        for other in [
+            record("B", "s/1-2", 5, false),
+            record("B", "s/1-2", 4, true),
+            record("C", "s/1-2", 4, false),
+        ] {
+            done[0] = other;
+            let mut steps = 0;
+            let e = run_benchmark(&b, &Config::default(), 4, false, &done, &mut |_| {
+                steps += 1;
+                ControlFlow::Continue(())
+            })
+            .unwrap_err();
+            assert!(e.to_string().contains("cloud_bin_"), "{e}");
+            assert_eq!(
+                steps, 3,
+                "two reused records, then the start of the third pair"
+            );
+        }
+
+        // Break before a pair runs: nothing is read.
+        done[0] = record("B", "s/0-0", 4, false);
+        let none = run_benchmark(
+            &b,
+            &Config::default(),
+            4,
+            false,
+            &done,
+            &mut |step| match step {
+                PairStep::Running(_) => ControlFlow::Break(()),
+                PairStep::Done { .. } => ControlFlow::Continue(()),
+            },
+        )
+        .unwrap();
+        assert_eq!(none.len(), 2);
+    }
+
+    #[test]
+    fn a_missing_benchmark_folder_is_an_io_error_naming_it() {
+        let e = PairBenchmark::load("/nonexistent/mtpcr-benchmark", None).unwrap_err();
+        assert!(matches!(e, Error::Io { .. }), "{e:?}");
+        assert!(
+            e.to_string().contains("/nonexistent/mtpcr-benchmark"),
+            "{e}"
+        );
     }
 
     #[test]
