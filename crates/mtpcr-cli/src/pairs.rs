@@ -194,13 +194,13 @@ pub fn eval_pairs(
         rows.push(("all".to_string(), summarize(records.iter().map(|(_, r)| r))));
         for (scene, s) in &rows {
             outln!(
-                "{:<12} {:<52} {:>5} {:>7.1} {:>7.2} {:>7.3} {:>7.2} {:>15} {:>16}",
+                "{:<12} {:<52} {:>5} {:>7.1} {:>7} {:>7} {:>7.2} {:>15} {:>16}",
                 name,
                 scene,
                 s.pairs,
                 s.recall,
-                s.re_deg,
-                s.te,
+                or_dash(s.re_deg, 2),
+                or_dash(s.te, 3),
                 s.median_seconds,
                 format!("{}/{}", s.failed_confident, s.failed),
                 format!("{}/{}", s.registered_doubted, s.registered)
@@ -222,4 +222,13 @@ pub fn eval_pairs(
         outln!("wrote {}", path.display());
     }
     Ok(())
+}
+
+/// `v` with `decimals`, or "-" when there is none (a mean over no registered pair).
+fn or_dash(v: f64, decimals: usize) -> String {
+    if v.is_finite() {
+        format!("{v:.decimals$}")
+    } else {
+        "-".to_string()
+    }
 }
