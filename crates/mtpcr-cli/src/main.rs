@@ -669,39 +669,31 @@ fn main() -> ExitCode {
             noise,
             pairs: pair_args,
             run,
-        } if problems.iter().any(|p| p.is_dir()) => pairs::eval_pairs(
-            problems,
-            *runs,
-            *seed,
-            data_root.as_deref(),
-            json.as_deref(),
-            (*ground_truth_frame, *noise),
-            pair_args,
-            run,
-        )
-        .map(|_| ExitCode::SUCCESS),
-        Command::Eval {
-            problems,
-            runs,
-            seed,
-            data_root,
-            json,
-            ground_truth_frame,
-            noise,
-            pairs: _,
-            run,
-        } => eval(
-            problems,
-            runs.unwrap_or(10),
-            *seed,
-            data_root.as_deref(),
-            json.as_deref(),
-            RunStart {
-                ground_truth_frame: *ground_truth_frame,
-                noise: *noise,
-            },
-            run,
-        )
+        } => if problems.iter().any(|p| p.is_dir()) {
+            pairs::eval_pairs(
+                problems,
+                *runs,
+                *seed,
+                data_root.as_deref(),
+                json.as_deref(),
+                (*ground_truth_frame, *noise),
+                pair_args,
+                run,
+            )
+        } else {
+            eval(
+                problems,
+                runs.unwrap_or(10),
+                *seed,
+                data_root.as_deref(),
+                json.as_deref(),
+                RunStart {
+                    ground_truth_frame: *ground_truth_frame,
+                    noise: *noise,
+                },
+                run,
+            )
+        }
         .map(|_| ExitCode::SUCCESS),
         Command::Experiment(args) => experiment::run(args).map(|_| ExitCode::SUCCESS),
         Command::DumpConfig { paper } => dump_config(*paper).map(|_| ExitCode::SUCCESS),

@@ -346,20 +346,19 @@ impl PreparedProblem {
         target: usize,
         count: usize,
     ) -> Result<Vec<Rigid>> {
-        Ok(match self.pair_matches(source, target, count)? {
-            Some(matches) => candidate_poses(&matches, &self.features_of(source, target)),
-            None => Vec::new(),
-        })
+        Ok(self
+            .pair_hypotheses(source, target, count)?
+            .map_or_else(Vec::new, |(_, poses)| poses))
     }
 
-    /// The descriptor matches of a pair (centred frames), set to return `count` candidates;
-    /// `None` without features.
-    pub(crate) fn pair_matches(
+    /// The descriptor matches of a pair and its candidate poses from them (centred frames,
+    /// at most `count`, best first); `None` without features.
+    pub(crate) fn pair_hypotheses(
         &self,
         source: usize,
         target: usize,
         count: usize,
-    ) -> Result<Option<PairMatches>> {
+    ) -> Result<Option<(PairMatches, Vec<Rigid>)>> {
         let Some((config, features)) = &self.features else {
             return Ok(None);
         };
@@ -367,15 +366,14 @@ impl PreparedProblem {
             num_candidates: count,
             ..config.clone()
         };
-        PairMatches::new(&features[source], &features[target], &config).map(Some)
-    }
-
-    /// The features of `source` and `target` (empty without features).
-    pub(crate) fn features_of(&self, source: usize, target: usize) -> [&Features; 2] {
-        match &self.features {
-            Some((_, f)) => [&f[source], &f[target]],
-            None => [&EMPTY_FEATURES, &EMPTY_FEATURES],
-        }
+        let (s, t) = (&features[source], &features[target]);
+        let matches = PairMatches::new(s, t, &config)?;
+        let poses = matches
+            .candidates(s, t)
+            .iter()
+            .map(|c| Rigid::from_matrix(&c.t_target_source))
+            .collect();
+        Ok(Some((matches, poses)))
     }
 
     /// `t` (cloud `s` -> cloud `d`, original frames) in the centred frames.
@@ -405,22 +403,4 @@ pub(crate) fn thread_pool(num_threads: usize) -> Result<rayon::ThreadPool> {
         .num_threads(num_threads)
         .build()
         .map_err(|e| Error::InvalidInput(format!("cannot start {num_threads} threads: {e}")))
-}
-
-static EMPTY_FEATURES: Features = Features {
-    points: Vec::new(),
-    normals: Vec::new(),
-    descriptors: Vec::new(),
-};
-
-/// The candidates of a pair's matches as centred poses, best first.
-pub(crate) fn candidate_poses(
-    matches: &PairMatches,
-    [source, target]: &[&Features; 2],
-) -> Vec<Rigid> {
-    matches
-        .candidates(source, target)
-        .iter()
-        .map(|c| Rigid::from_matrix(&c.t_target_source))
-        .collect()
 }

@@ -10,7 +10,6 @@ use crate::features::PairMatches;
 use crate::interrupt::Interrupt;
 use crate::loss::Loss;
 use crate::multiview::{best_closing_triple, loop_tolerance, register_unordered};
-use crate::problem::candidate_poses;
 use crate::problem::{thread_pool, PreparedProblem};
 use crate::refine::refine_poses;
 use crate::result::{EdgeEstimate, Registration};
@@ -54,24 +53,20 @@ impl PreparedProblem {
         let mut losses: Vec<&dyn Loss> = aiding.iter().map(|l| l as &dyn Loss).collect();
         losses.extend(original.iter().map(|l| l as &dyn Loss));
         // In the pool: the feature matching runs in parallel and must use `num_threads`.
-        let matches: Vec<Option<PairMatches>> = pool.install(|| {
+        let per_edge: Vec<Option<(PairMatches, Vec<Rigid>)>> = pool.install(|| {
             graph
                 .edges()
                 .par_iter()
-                .map(|e| self.pair_matches(e.source, e.target, config.hypotheses))
+                .map(|e| self.pair_hypotheses(e.source, e.target, config.hypotheses))
                 .collect::<Result<_>>()
         })?;
-        let hypotheses: Vec<Vec<Rigid>> = pool.install(|| {
-            graph
-                .edges()
-                .par_iter()
-                .zip(&matches)
-                .map(|(e, m)| match m {
-                    Some(m) => candidate_poses(m, &self.features_of(e.source, e.target)),
-                    None => Vec::new(),
-                })
-                .collect()
-        });
+        let (matches, hypotheses): (Vec<Option<PairMatches>>, Vec<Vec<Rigid>>) = per_edge
+            .into_iter()
+            .map(|f| match f {
+                Some((m, poses)) => (Some(m), poses),
+                None => (None, Vec::new()),
+            })
+            .unzip();
         let seeds = pool.install(|| self.seeds(&hypotheses));
         let tasks = Tasks {
             graph,
