@@ -291,21 +291,24 @@ fn register_files(
             mtpcr_core::io::matrix_text(&e.t_target_source)
         );
     }
-    outln!(
-        "{:<6} {:>14} {:>12}   (the evolution's best costs, before refinement)",
-        "pair",
-        "best original",
-        "best aiding"
-    );
-    for (k, e) in result.edges.iter().enumerate() {
+    // Scans in no known order are placed from verified hypotheses: no evolution, no tasks.
+    if result.task_names.len() == 2 * edges {
         outln!(
-            "{:<6} {:>14.6} {:>12.6}   ({} / {})",
-            result.edge_name(k),
-            e.original_cost,
-            e.aiding_cost,
-            result.task_names[edges + k],
-            result.task_names[k]
+            "{:<6} {:>14} {:>12}   (the evolution's best costs, before refinement)",
+            "pair",
+            "best original",
+            "best aiding"
         );
+        for (k, e) in result.edges.iter().enumerate() {
+            outln!(
+                "{:<6} {:>14.6} {:>12.6}   ({} / {})",
+                result.edge_name(k),
+                e.original_cost,
+                e.aiding_cost,
+                result.task_names[edges + k],
+                result.task_names[k]
+            );
+        }
     }
     for u in &result.unplaced {
         outln!("cloud {} NOT PLACED: {}", u.view + 1, u.reason);

@@ -324,6 +324,38 @@ fn register_writes_every_output_file() {
 }
 
 /// The names in a folder.
+/// Four or more scans are placed without an evolution (no tasks, no costs to print): the
+/// command must still print every pose and write its folder (it panicked on the cost table).
+#[test]
+fn register_places_four_scans_in_no_known_order() {
+    let dir = tempfile::tempdir().unwrap();
+    let views = synthetic::views_around(3, 4, 3000);
+    let paths: Vec<PathBuf> = views
+        .clouds
+        .iter()
+        .enumerate()
+        .map(|(i, c)| {
+            let path = dir.path().join(format!("scan{}.ply", i + 1));
+            write_ply(&path, c.points(), None).unwrap();
+            path
+        })
+        .collect();
+    let out = dir.path().join("out");
+    let run = mtpcr()
+        .arg("register")
+        .args(args_of(&paths))
+        .args(["-o", out.to_str().unwrap(), "--seed", "1", "-q"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(REGISTERED.contains(&run.status.code().unwrap()), "{stderr}");
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(stdout.contains("verdict"), "{stdout}");
+    let result = read_json(&out.join("result.json"));
+    assert_eq!(result["poses"].as_array().map(Vec::len), Some(4), "{result}");
+}
+
 fn file_names(dir: &Path) -> Vec<String> {
     std::fs::read_dir(dir)
         .unwrap()
