@@ -19,7 +19,10 @@ Usage:
 The files follow shared/problems-nview/README.md and what `mtpcr eval` reads
 (Problem::load): `name`, `scans`, `poses` (scan-to-world 4x4, x_world = pose @ [x, 1]), plus
 `units`, `pose_convention`, `source`, `suite`, `fragments` (the k of each cloud_bin_k) and
-`frames` (the sequence and frame range of each fragment, line 1 of its .info.txt). Scan paths
+`frames` (the sequence and frame range of each fragment, line 1 of its .info.txt), and, when
+the scene's benchmark lists are present, `pair_sets` (the 3DMatch and 3DLoMatch pairs among
+the fragments, as scan indices) with `pair_success` (15 degrees, 0.3 m): `mtpcr eval` then
+reports how many of those pairs the returned poses recover. Scan paths
 are absolute, so they resolve wherever the file lives (Problem::load keeps absolute paths).
 
 Poses: lines 2-5 of cloud_bin_k.info.txt are the 4x4 pose P_k that maps fragment k into the
@@ -127,6 +130,18 @@ def scene_problem(folder: Path, max_fragments: int | None) -> dict:
     }
 
 
+def pair_sets(prob: dict, benchmarks: Path, scene: str) -> dict:
+    """The benchmarks' pairs among the chosen fragments, as scan indices of the problem."""
+    index = {k: n for n, k in enumerate(prob["fragments"])}
+    sets = {}
+    for bench in ("3DMatch", "3DLoMatch"):
+        gt_log = benchmarks / bench / scene / "gt.log"
+        if gt_log.is_file():
+            pairs = [[index[i], index[j]] for (i, j) in read_gt_log(gt_log) if i in index and j in index]
+            sets[bench] = sorted(pairs)
+    return sets
+
+
 def check_against_gt_log(prob: dict, gt_log: Path) -> str:
     if not gt_log.is_file():
         return "no gt.log to check against"
@@ -185,6 +200,12 @@ def main(argv: list[str] | None = None) -> int:
         check_against_gt_log(p, data / "benchmarks" / "3DMatch" / d.name / "gt.log")
         for d, p in zip(scenes, problems)
     ]
+    for d, p in zip(scenes, problems):
+        sets = pair_sets(p, data / "benchmarks", d.name)
+        if sets:
+            # scored by `mtpcr eval` from the returned poses (the benchmarks' criterion)
+            p["pair_sets"] = sets
+            p["pair_success"] = {"degrees": 15.0, "translation": 0.3}
     out.mkdir(parents=True, exist_ok=True)
     for p, t, check in zip(problems, targets, checks):
         write_json(t, p)

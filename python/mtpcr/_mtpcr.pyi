@@ -91,9 +91,9 @@ class Config:
     @property
     def order(self) -> _Order:
         """How the clouds relate: `auto` (two: a pair; three: the paper's loop; four or
-        more: a set in no known order, its overlapping pairs found and verified around
-        three-scan loops) or `given` (three or more given in loop order, searched
-        jointly as one loop). Paper: given."""
+        more: a set in no known order, its overlapping pairs found and joined where
+        loops through them close) or `given` (three or more given in loop order,
+        searched jointly as one loop). Paper: given."""
     @property
     def population_size(self) -> int:
         """Individuals per population (`n`; two populations per edge of the view graph).

@@ -527,7 +527,27 @@ fn write_eval_json(
 
 /// One problem's row of the multi-view table: name, scans, and per run (success, placed
 /// scans, worst and mean rotation error in degrees, seconds).
-type ViewRow = (String, usize, Vec<(bool, usize, f64, f64, f64)>);
+type ViewRow = (String, usize, Vec<ViewRun>);
+
+/// One run of a problem of four or more scans, as the tables show it.
+struct ViewRun {
+    seed: u64,
+    success: bool,
+    confident: bool,
+    placed: usize,
+    worst: f64,
+    mean: f64,
+    seconds: f64,
+    /// Placed scans off by the problem's pair bounds (15 degrees / 0.3 m for 3DMatch rooms).
+    wrong: usize,
+    /// Placed scans within 3, 5, 10 degrees; within 0.05, 0.1, 0.25 units.
+    within_degrees: [usize; 3],
+    within_translation: [usize; 3],
+    pairs: Vec<mtpcr_core::eval::PairSetScore>,
+}
+
+const WITHIN_DEGREES: [f64; 3] = [3.0, 5.0, 10.0];
+const WITHIN_TRANSLATION: [f64; 3] = [0.05, 0.1, 0.25];
 
 /// The runs of a problem of four or more scans in no known order: every scan's pose in the
 /// first scan's frame against the truth (success: all placed and under 1 degree).
@@ -554,34 +574,64 @@ fn eval_views(
             runs
         ));
         let clouds = with_noise(clouds, noise, s)?;
-        let (result, scores) =
-            mtpcr_core::eval::run_moved_views(&clouds, &problem.poses, config, s)?;
+        let (result, scores, pairs) = mtpcr_core::eval::run_moved_views(
+            &clouds,
+            &problem.poses,
+            &problem.pair_sets,
+            problem.pair_success,
+            config,
+            s,
+        )?;
         bar.inc(1);
         let placed: Vec<f64> = scores.rot_deg.iter().flatten().copied().collect();
         let worst = placed.iter().copied().fold(0.0, f64::max);
         let mean = placed.iter().sum::<f64>() / placed.len().max(1) as f64;
+        let errors: Vec<(f64, f64)> = scores
+            .rot_deg
+            .iter()
+            .zip(&scores.translation)
+            .filter_map(|(r, t)| Some(((*r)?, (*t)?)))
+            .collect();
+        let bounds = problem.pair_success;
+        let count = |f: &dyn Fn(&(f64, f64)) -> bool| errors.iter().filter(|e| f(e)).count();
+        let run = ViewRun {
+            seed: s,
+            success: scores.success,
+            confident: result.verdict.confident,
+            placed: placed.len(),
+            worst,
+            mean,
+            seconds: result.seconds,
+            wrong: count(&|&(r, t)| r >= bounds.degrees || t >= bounds.translation),
+            within_degrees: WITHIN_DEGREES.map(|d| count(&|&(r, _)| r < d)),
+            within_translation: WITHIN_TRANSLATION.map(|d| count(&|&(_, t)| t < d)),
+            pairs,
+        };
         if !quiet {
             bar.suspend(|| {
                 eprintln!(
-                    "{} run {}/{} seed {s}: {} {} of {} scans placed, rotation error worst {worst:.2} mean {mean:.2} deg, {:.2} s",
+                    "{} run {}/{} seed {s}: {} {} of {} scans placed ({} wrong), rotation error worst {worst:.2} mean {mean:.2} deg, {:.2} s",
                     problem.name,
                     r + 1,
                     runs,
                     if scores.success { "ok  " } else { "FAIL" },
                     placed.len(),
                     clouds.len(),
+                    run.wrong,
                     result.seconds
                 )
             });
         }
         run_json.push(serde_json::json!({
             "seed": s, "success": scores.success, "rot_deg": scores.rot_deg,
-            "trans_rel": scores.trans, "seconds": result.seconds,
+            "trans_rel": scores.trans, "translation": scores.translation,
+            "wrong": run.wrong, "pair_sets": run.pairs, "seconds": result.seconds,
             "unplaced": result.unplaced.iter().map(|u| u.view).collect::<Vec<_>>(),
+            "unplaced_reasons": result.unplaced.iter().map(|u| u.reason.clone()).collect::<Vec<_>>(),
             "verdict": result.verdict,
             "poses": result.poses.iter().map(|p| p.as_ref().map(mtpcr_core::io::matrix_rows)).collect::<Vec<_>>(),
         }));
-        all.push((scores.success, placed.len(), worst, mean, result.seconds));
+        all.push(run);
     }
     rows.push((problem.name.clone(), clouds.len(), all));
     Ok(run_json)
@@ -600,11 +650,11 @@ fn print_view_rows(rows: &[ViewRow]) {
         "seconds"
     );
     for (name, scans, all) in rows {
-        let ok = all.iter().filter(|r| r.0).count();
-        let placed: Vec<f64> = all.iter().map(|r| r.1 as f64).collect();
-        let worst: Vec<f64> = all.iter().map(|r| r.2).collect();
-        let mean: Vec<f64> = all.iter().map(|r| r.3).collect();
-        let secs: Vec<f64> = all.iter().map(|r| r.4).collect();
+        let ok = all.iter().filter(|r| r.success).count();
+        let placed: Vec<f64> = all.iter().map(|r| r.placed as f64).collect();
+        let worst: Vec<f64> = all.iter().map(|r| r.worst).collect();
+        let mean: Vec<f64> = all.iter().map(|r| r.mean).collect();
+        let secs: Vec<f64> = all.iter().map(|r| r.seconds).collect();
         outln!(
             "{:<14} {:>5} {:>5} {:>9} {:>12.1} {:>16} {:>15.3} {:>8.2}",
             name,
@@ -620,6 +670,46 @@ fn print_view_rows(rows: &[ViewRow]) {
             mean_std(&mean).0,
             mean_std(&secs).0
         );
+    }
+    // Scenes: each run's placement and the pairs its poses recover.
+    let rooms: Vec<_> = rows
+        .iter()
+        .filter(|(_, _, all)| all.iter().any(|r| !r.pairs.is_empty()))
+        .collect();
+    if rooms.is_empty() {
+        return;
+    }
+    outln!(
+        "\n{:<14} {:>5} {:>7} {:>6} {:>13} {:>17} {:>9}  pairs recovered",
+        "problem",
+        "seed",
+        "placed",
+        "wrong",
+        "<3/5/10 deg",
+        "<0.05/0.1/0.25",
+        "confident"
+    );
+    for (name, scans, all) in rooms {
+        for r in all {
+            let pairs: Vec<String> = r
+                .pairs
+                .iter()
+                .map(|p| format!("{} {}/{}", p.name, p.recovered, p.total))
+                .collect();
+            let [d3, d5, d10] = r.within_degrees;
+            let [t5, t10, t25] = r.within_translation;
+            outln!(
+                "{:<14} {:>5} {:>7} {:>6} {:>13} {:>17} {:>9}  {}",
+                name,
+                r.seed,
+                format!("{}/{scans}", r.placed),
+                r.wrong,
+                format!("{d3}/{d5}/{d10}"),
+                format!("{t5}/{t10}/{t25}"),
+                r.confident,
+                pairs.join(", ")
+            );
+        }
     }
 }
 

@@ -353,7 +353,11 @@ fn register_places_four_scans_in_no_known_order() {
     let stdout = String::from_utf8_lossy(&run.stdout);
     assert!(stdout.contains("verdict"), "{stdout}");
     let result = read_json(&out.join("result.json"));
-    assert_eq!(result["poses"].as_array().map(Vec::len), Some(4), "{result}");
+    assert_eq!(
+        result["poses"].as_array().map(Vec::len),
+        Some(4),
+        "{result}"
+    );
 }
 
 fn file_names(dir: &Path) -> Vec<String> {

@@ -24,8 +24,8 @@ pub enum Method {
 #[serde(rename_all = "lowercase")]
 pub enum Order {
     /// Two clouds are one pair; three are the paper's loop; four or more are a set in no known
-    /// order (overlapping pairs found, verified around three-scan loops, placed by a spanning
-    /// tree).
+    /// order (overlapping pairs found, scans joined group by group where loops through them
+    /// close).
     Auto,
     /// Three or more clouds given in loop order (cloud k overlaps cloud k + 1, the last
     /// overlaps the first), searched jointly as one loop.
@@ -88,8 +88,8 @@ settings! {
     /// `gmfea`. Paper: mtpcr.
     method: Method = Method::Mtpcr,
     /// How the clouds relate: `auto` (two: a pair; three: the paper's loop; four or more: a
-    /// set in no known order, its overlapping pairs found and verified around three-scan
-    /// loops) or `given` (three or more given in loop order, searched jointly as one
+    /// set in no known order, its overlapping pairs found and joined where loops through
+    /// them close) or `given` (three or more given in loop order, searched jointly as one
     /// loop). Paper: given.
     order: Order = Order::Given,
     /// Individuals per population (`n`; two populations per edge of the view graph). In

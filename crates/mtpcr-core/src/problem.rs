@@ -337,20 +337,6 @@ impl PreparedProblem {
         }
     }
 
-    /// Up to `count` pose hypotheses for `source -> target` (centred frames) from the
-    /// clouds' features, best first; empty when the problem was prepared without them or
-    /// nothing matched.
-    pub(crate) fn hypotheses(
-        &self,
-        source: usize,
-        target: usize,
-        count: usize,
-    ) -> Result<Vec<Rigid>> {
-        Ok(self
-            .pair_hypotheses(source, target, count)?
-            .map_or_else(Vec::new, |(_, poses)| poses))
-    }
-
     /// The descriptor matches of a pair and its candidate poses from them (centred frames,
     /// at most `count`, best first); `None` without features.
     pub(crate) fn pair_hypotheses(

@@ -122,6 +122,8 @@ pub struct PoseScores {
     pub rot_deg: Vec<Option<f64>>,
     /// Translation error of each scan's pose as a fraction of the object's diagonal.
     pub trans: Vec<Option<f64>>,
+    /// Translation error of each scan's pose in the data's units.
+    pub translation: Vec<Option<f64>>,
     /// Every scan placed and under [`VIEW_SUCCESS_DEGREES`].
     pub success: bool,
 }
@@ -134,7 +136,7 @@ pub fn score_poses(
     diagonal: f64,
 ) -> PoseScores {
     let base = invert_rigid(&truth[0]);
-    let (rot_deg, trans): (Vec<Option<f64>>, Vec<Option<f64>>) = truth
+    let (rot_deg, translation): (Vec<Option<f64>>, Vec<Option<f64>>) = truth
         .iter()
         .enumerate()
         .map(|(k, pose)| {
@@ -142,20 +144,72 @@ pub fn score_poses(
             match estimate.get(k).copied().flatten() {
                 Some(e) => (
                     Some(rotation_error_deg(&e, &gt)),
-                    Some(translation_error(&e, &gt) / diagonal),
+                    Some(translation_error(&e, &gt)),
                 ),
                 None => (None, None),
             }
         })
         .unzip();
+    let trans = translation
+        .iter()
+        .map(|t| t.map(|t| t / diagonal))
+        .collect();
     let success = rot_deg
         .iter()
         .all(|d| d.is_some_and(|d| d < VIEW_SUCCESS_DEGREES));
     PoseScores {
         rot_deg,
         trans,
+        translation,
         success,
     }
+}
+
+/// How many pairs of a [`problem::PairSet`] the returned poses recover.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct PairSetScore {
+    /// The set's name (`3DMatch`).
+    pub name: String,
+    /// Pairs whose two scans are placed and whose relative pose is within the bounds.
+    pub recovered: usize,
+    /// Pairs in the set.
+    pub total: usize,
+}
+
+/// Scores the relative pose of the two scans of every pair of `sets`, from the estimated
+/// poses (scan k into scan 0's frame; `None`: not placed) against ground-truth scan-to-world
+/// poses: recovered when both scans are placed and `inv(E_j) E_i` is within `success` of
+/// `inv(P_j) P_i`.
+pub fn score_pair_sets(
+    estimate: &[Option<Transform>],
+    truth: &[Transform],
+    sets: &[problem::PairSet],
+    success: problem::PairSuccess,
+) -> Vec<PairSetScore> {
+    sets.iter()
+        .map(|set| {
+            let recovered = set
+                .pairs
+                .iter()
+                .filter(|&&(i, j)| {
+                    let (Some(Some(ei)), Some(Some(ej)), Some(pi), Some(pj)) =
+                        (estimate.get(i), estimate.get(j), truth.get(i), truth.get(j))
+                    else {
+                        return false;
+                    };
+                    let e = invert_rigid(ej) * ei;
+                    let g = invert_rigid(pj) * pi;
+                    rotation_error_deg(&e, &g) < success.degrees
+                        && translation_error(&e, &g) < success.translation
+                })
+                .count();
+            PairSetScore {
+                name: set.name.clone(),
+                recovered,
+                total: set.pairs.len(),
+            }
+        })
+        .collect()
 }
 
 /// The bounding-box diagonal of the clouds placed by their scan-to-world poses.
@@ -174,13 +228,16 @@ pub fn object_diagonal(clouds: &[PointCloud], poses: &[Transform]) -> f64 {
 
 /// One evaluation run of any number of clouds with ground-truth scan-to-world poses: move
 /// each cloud by a seeded random motion (as [`run_moved`]), register with
-/// `config.seed = Some(seed)`, score every scan's pose in the first scan's frame.
+/// `config.seed = Some(seed)`, score every scan's pose in the first scan's frame and the
+/// pairs of `sets` ([`score_pair_sets`]).
 pub fn run_moved_views(
     clouds: &[PointCloud],
     poses: &[Transform],
+    sets: &[problem::PairSet],
+    success: problem::PairSuccess,
     config: &Config,
     seed: u64,
-) -> Result<(Registration, PoseScores)> {
+) -> Result<(Registration, PoseScores, Vec<PairSetScore>)> {
     let extent = clouds
         .iter()
         .map(PointCloud::largest_side)
@@ -204,7 +261,8 @@ pub fn run_moved_views(
     let result = register(&moved, &config, None)?;
     let diagonal = object_diagonal(clouds, poses);
     let scores = score_poses(&result.poses, &moved_poses, diagonal);
-    Ok((result, scores))
+    let pairs = score_pair_sets(&result.poses, &moved_poses, sets, success);
+    Ok((result, scores, pairs))
 }
 
 /// One evaluation run with every cloud first placed by its ground-truth scan-to-world pose (so
@@ -279,6 +337,49 @@ mod tests {
             &[Transform::identity()],
         );
         assert!(!off.success && (off.rot_deg[0] - 10.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn pair_sets_are_scored_from_the_relative_poses() {
+        use problem::{PairSet, PairSuccess};
+        let truth = [
+            decode(&[0.0, 0.0, 0.0, 5.0, 0.0, 0.0]),
+            decode(&[0.0, 30.0, 0.0, 5.0, 1.0, 0.0]),
+            decode(&[90.0, 0.0, 0.0, 0.0, 0.0, 2.0]),
+            decode(&[0.0, 0.0, 45.0, 1.0, 1.0, 1.0]),
+        ];
+        // Exact poses into scan 0's frame, except scan 2 (turned 10 degrees about its own
+        // origin: pairs (2, j) are off by 10 degrees and nothing in translation) and scan 3
+        // (unplaced).
+        let into_0 = |k: usize| invert_rigid(&truth[0]) * truth[k];
+        let estimate = [
+            Some(into_0(0)),
+            Some(into_0(1)),
+            Some(into_0(2) * decode(&[10.0, 0.0, 0.0, 0.0, 0.0, 0.0])),
+            None,
+        ];
+        let sets = [
+            PairSet {
+                name: "all".into(),
+                pairs: vec![(0, 1), (2, 1), (2, 0), (2, 3)],
+            },
+            PairSet {
+                name: "none".into(),
+                pairs: vec![],
+            },
+        ];
+        let loose = score_pair_sets(&estimate, &truth, &sets, PairSuccess::default());
+        assert_eq!((loose[0].recovered, loose[0].total), (3, 4));
+        assert_eq!((loose[1].recovered, loose[1].total), (0, 0));
+        let strict = PairSuccess {
+            degrees: 5.0,
+            translation: 0.3,
+        };
+        let tight = score_pair_sets(&estimate, &truth, &sets, strict);
+        assert_eq!(
+            tight[0].recovered, 1,
+            "only (0, 1) avoids scan 2's 10 degrees"
+        );
     }
 
     #[test]

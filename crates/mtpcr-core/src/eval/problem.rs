@@ -26,6 +26,39 @@ pub struct Problem {
     pub poses: Vec<Transform>,
     /// What loading changed (poses re-orthonormalised), one sentence each.
     pub notes: Vec<String>,
+    /// Named lists of scan pairs (scan indices) scored from the returned poses, e.g. a 3DMatch
+    /// scene's benchmark pairs (`pair_sets` in the file; empty when absent).
+    pub pair_sets: Vec<PairSet>,
+    /// When a pair of [`Problem::pair_sets`] counts as recovered.
+    pub pair_success: PairSuccess,
+}
+
+/// A named list of scan pairs of a problem.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct PairSet {
+    /// The list's name (`3DMatch`).
+    pub name: String,
+    /// Scan index pairs (0-based).
+    pub pairs: Vec<(usize, usize)>,
+}
+
+/// A pair is recovered when the relative pose of its scans is within both bounds of the truth.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct PairSuccess {
+    /// Rotation error bound in degrees.
+    pub degrees: f64,
+    /// Translation error bound in the data's units.
+    pub translation: f64,
+}
+
+impl Default for PairSuccess {
+    /// The 3DMatch benchmarks' criterion: 15 degrees and 0.3 (metres).
+    fn default() -> Self {
+        PairSuccess {
+            degrees: 15.0,
+            translation: 0.3,
+        }
+    }
 }
 
 #[derive(serde::Deserialize)]
@@ -33,6 +66,9 @@ struct ProblemFile {
     name: String,
     scans: Vec<String>,
     poses: Vec<[[f64; 4]; 4]>,
+    #[serde(default)]
+    pair_sets: std::collections::BTreeMap<String, Vec<(usize, usize)>>,
+    pair_success: Option<PairSuccess>,
 }
 
 impl Problem {
@@ -84,11 +120,33 @@ impl Problem {
                 ));
             }
         }
+        let n = file.scans.len();
+        let mut pair_sets = Vec::new();
+        for (name, pairs) in file.pair_sets {
+            if let Some(&(i, j)) = pairs.iter().find(|&&(i, j)| i >= n || j >= n || i == j) {
+                return Err(Error::malformed(
+                    path,
+                    format!(
+                        "pair ({i}, {j}) of pair set {name} is not two different scans of 0..{n}"
+                    ),
+                ));
+            }
+            pair_sets.push(PairSet { name, pairs });
+        }
+        let pair_success = file.pair_success.unwrap_or_default();
+        if !(pair_success.degrees > 0.0 && pair_success.translation > 0.0) {
+            return Err(Error::malformed(
+                path,
+                "pair_success needs positive degrees and translation".to_string(),
+            ));
+        }
         Ok(Problem {
             name: file.name,
             scans: file.scans.iter().map(|s| root.join(s)).collect(),
             poses,
             notes,
+            pair_sets,
+            pair_success,
         })
     }
 
@@ -158,5 +216,51 @@ mod tests {
         )
         .unwrap_err();
         assert!(e.to_string().contains("at least 2 scans"), "{e}");
+    }
+
+    #[test]
+    fn pair_sets_are_read_and_checked() {
+        let pose = rows(&decode(&[0.0; 6]));
+        let file = |sets: &str| {
+            format!(
+                r#"{{"name": "room", "scans": ["a", "b", "c"], "poses": [{pose}, {pose}, {pose}]{sets}}}"#
+            )
+        };
+        let p = Problem::load(write("plain.json", &file("")), None).unwrap();
+        assert!(p.pair_sets.is_empty());
+        assert_eq!(p.pair_success, PairSuccess::default());
+        let p = Problem::load(
+            write(
+                "sets.json",
+                &file(r#", "pair_sets": {"near": [[0, 1], [1, 2]], "far": [[0, 2]]}, "pair_success": {"degrees": 5, "translation": 0.1}"#),
+            ),
+            None,
+        )
+        .unwrap();
+        let names: Vec<&str> = p.pair_sets.iter().map(|s| s.name.as_str()).collect();
+        assert_eq!(names, ["far", "near"]);
+        assert_eq!(p.pair_sets[1].pairs, [(0, 1), (1, 2)]);
+        assert_eq!(p.pair_success.degrees, 5.0);
+        let e = Problem::load(
+            write(
+                "badpair.json",
+                &file(r#", "pair_sets": {"near": [[0, 3]]}"#),
+            ),
+            None,
+        )
+        .unwrap_err();
+        assert!(
+            e.to_string().contains("pair (0, 3) of pair set near"),
+            "{e}"
+        );
+        let e = Problem::load(
+            write(
+                "badbounds.json",
+                &file(r#", "pair_sets": {}, "pair_success": {"degrees": 0, "translation": 0.3}"#),
+            ),
+            None,
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("pair_success"), "{e}");
     }
 }
