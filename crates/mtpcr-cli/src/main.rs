@@ -66,8 +66,10 @@ enum Command {
     /// Each file is PLY, PCD, E57 (every scan in it is a cloud), LAS/LAZ or XYZ text. Two
     /// clouds give T12; more give each cloud's pose in cloud 1's frame (with --order given:
     /// clouds in loop order, T12, T23, ..., Tn1). The folder holds
-    /// result.json, config.toml (the settings, to repeat the run), transforms.txt, merged.ply
-    /// (the clouds in cloud 1's frame, one colour per view), convergence.png, views.png and
+    /// result.json, config.toml (the settings, to repeat the run), transforms.txt, poses.log
+    /// (each placed cloud's pose in cloud 1's frame, the 3DMatch/Redwood trajectory format),
+    /// pose_graph.json (Open3D's pose graph: open3d.io.read_pose_graph), merged.ply (the
+    /// clouds in cloud 1's frame, one colour per view), convergence.png, views.png and
     /// view.html (an interactive 3-D view that opens offline).
     Register {
         /// The point-cloud files (one E57 file of several scans is enough).

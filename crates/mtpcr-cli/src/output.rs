@@ -3,15 +3,17 @@
 use crate::error::{CliResult, Failure};
 use crate::interrupt;
 use crate::plots;
-use mtpcr_core::io::{matrix_rows, matrix_text, write_ply};
+use mtpcr_core::io::{matrix_rows, matrix_text, pose_graph_json, trajectory_log, write_ply};
 use mtpcr_core::{Config, PointCloud, Registration};
 use std::path::{Path, PathBuf};
 
 /// The files a run writes, in the order they are written.
-pub const OUTPUT_FILES: [&str; 7] = [
+pub const OUTPUT_FILES: [&str; 9] = [
     "result.json",
     "config.toml",
     "transforms.txt",
+    "poses.log",
+    "pose_graph.json",
     "merged.ply",
     "convergence.png",
     "views.png",
@@ -349,6 +351,15 @@ pub fn write_results(dir: &Path, rec: &RunRecord<'_>) -> CliResult<Vec<String>> 
     write_file(&path("config.toml"), toml.as_bytes())?;
 
     write_file(&path("transforms.txt"), transforms_text(rec).as_bytes())?;
+    // The poses for the next tool: a 3DMatch/Redwood trajectory and an Open3D pose graph.
+    write_file(
+        &path("poses.log"),
+        trajectory_log(&rec.result.poses).as_bytes(),
+    )?;
+    let graph =
+        serde_json::to_string_pretty(&pose_graph_json(&rec.result.poses, &rec.result.edges))
+            .map_err(|e| Failure(format!("cannot serialise the pose graph: {e}")))?;
+    write_file(&path("pose_graph.json"), graph.as_bytes())?;
 
     // Unplaced clouds are left out of the merged cloud and the "after" pictures.
     let moved: Vec<Vec<[f64; 3]>> = rec

@@ -245,6 +245,8 @@ fn register_writes_every_output_file() {
         "convergence.png",
         "views.png",
         "view.html",
+        "poses.log",
+        "pose_graph.json",
     ] {
         let len = std::fs::metadata(out.join(name))
             .map(|m| m.len())
@@ -314,6 +316,8 @@ fn register_writes_every_output_file() {
         "config.toml",
         "convergence.png",
         "merged.ply",
+        "pose_graph.json",
+        "poses.log",
         "result.json",
         "transforms.txt",
         "view.html",
@@ -323,7 +327,6 @@ fn register_writes_every_output_file() {
     assert_eq!(names, expected);
 }
 
-/// The names in a folder.
 /// Four or more scans are placed without an evolution (no tasks, no costs to print): the
 /// command must still print every pose and write its folder (it panicked on the cost table).
 #[test]
@@ -360,6 +363,7 @@ fn register_places_four_scans_in_no_known_order() {
     );
 }
 
+/// The names in a folder.
 fn file_names(dir: &Path) -> Vec<String> {
     std::fs::read_dir(dir)
         .unwrap()

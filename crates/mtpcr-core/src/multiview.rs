@@ -399,7 +399,11 @@ fn place(
         .collect();
     for &(p, own, _) in &order {
         let overlap = chosen[p].map_or(0.0, |h| pairs[p].poses[h].1);
-        if joining.contains(&p) || overlap < CLOSURE_MIN_OVERLAP {
+        let min_overlap: f64 = std::env::var("MTPCR_CLOSURE_MIN")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(CLOSURE_MIN_OVERLAP);
+        if joining.contains(&p) || overlap < min_overlap {
             continue;
         }
         let Edge {

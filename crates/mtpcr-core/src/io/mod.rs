@@ -1,5 +1,6 @@
 //! Files in and out: point clouds in PLY, PCD, E57, LAS/LAZ, XYZ and PTS (read through one
-//! format-detecting entry point, [`read_scans`]), PLY out, and transforms as text
+//! format-detecting entry point, [`read_scans`]), PLY out, transforms as text, and poses as
+//! a `.log` trajectory or Open3D pose graph ([`trajectory_log`], [`pose_graph_json`])
 //! (registration problems with ground truth are read by `eval::problem`).
 //!
 //! [`read_scans`] returns every scan of a file (E57 files hold several, each with its pose);
@@ -14,9 +15,11 @@ mod e57;
 mod las;
 mod pcd;
 mod ply;
+mod posegraph;
 mod xyz;
 
 pub use self::ply::{read_ply, read_ply_bytes, write_ply};
+pub use self::posegraph::{pose_graph_json, trajectory_log};
 
 use crate::cloud::PointCloud;
 use crate::error::{Error, Result};
