@@ -399,11 +399,7 @@ fn place(
         .collect();
     for &(p, own, _) in &order {
         let overlap = chosen[p].map_or(0.0, |h| pairs[p].poses[h].1);
-        let min_overlap: f64 = std::env::var("MTPCR_CLOSURE_MIN")
-            .ok()
-            .and_then(|v| v.parse().ok())
-            .unwrap_or(CLOSURE_MIN_OVERLAP);
-        if joining.contains(&p) || overlap < min_overlap {
+        if joining.contains(&p) || overlap < CLOSURE_MIN_OVERLAP {
             continue;
         }
         let Edge {
