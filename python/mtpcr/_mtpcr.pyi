@@ -226,6 +226,12 @@ class Registration:
     def merge(self, *clouds: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
         """The clouds given to ``register`` (same order) merged in cloud 1's frame: (M, 3)
         points and the (M,) cloud index (from 0) of each; unplaced clouds left out."""
+    def trajectory_log(self) -> str:
+        """Each placed cloud's pose in cloud 1's frame as a ``.log`` trajectory (3DMatch /
+        Redwood format: a line ``k k n``, then the 4x4 pose); unplaced clouds left out."""
+    def pose_graph(self) -> dict[str, Any]:
+        """Open3D's pose graph as a dict (``json.dump`` it, then
+        ``open3d.io.read_pose_graph``): a node per cloud, an edge per pair used."""
     @property
     def confident(self) -> bool:
         """Whether the result can be believed (every pair overlaps and its surfaces lie on

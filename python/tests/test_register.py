@@ -318,3 +318,20 @@ def test_points_are_placed_and_merged_in_cloud_1s_frame(small_views):
         r.transform_points(1, clouds[1][:, :2])
     with pytest.raises(ValueError, match="2 clouds given, the registration has 3"):
         r.merge(*clouds[:2])
+
+
+def test_poses_are_exported_for_the_next_tool(small_views):
+    """The trajectory and the Open3D pose graph carry the same poses as ``poses``."""
+    clouds = small_views.clouds
+    r = mtpcr.register(*clouds, seed=3, **QUICK)
+    lines = r.trajectory_log().splitlines()
+    assert len(lines) == 5 * 3 and lines[0].split() == ["0", "0", "3"]
+    pose2 = np.array([[float(v) for v in line.split()] for line in lines[11:15]])
+    np.testing.assert_allclose(pose2, r.poses[2], atol=1e-9)
+    graph = r.pose_graph()
+    assert graph["class_name"] == "PoseGraph" and len(graph["nodes"]) == 3
+    # Open3D lists matrices column by column.
+    node2 = np.array(graph["nodes"][2]["pose"]).reshape(4, 4).T
+    np.testing.assert_allclose(node2, r.poses[2], atol=1e-12)
+    ends = [(e["source_node_id"], e["target_node_id"]) for e in graph["edges"]]
+    assert ends == [(e["source"], e["target"]) for e in r.edges]

@@ -385,8 +385,8 @@ pub fn write_results(dir: &Path, rec: &RunRecord<'_>) -> CliResult<Vec<String>> 
     } else {
         "Best cost per generation of each task".to_string()
     };
-    // Scans in no known order are placed without an evolution: no convergence to draw.
-    let with_history = !rec.result.history.is_empty();
+    // No convergence to draw without generations (the default, and scans in no known order).
+    let with_history = rec.result.history.len() > 1;
     if with_history {
         write_atomically(&path("convergence.png"), |tmp| {
             plots::convergence_png(

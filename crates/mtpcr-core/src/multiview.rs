@@ -626,6 +626,7 @@ mod tests {
             &v.clouds,
             &Config {
                 hypotheses: 0,
+                generations: 1,
                 ..config.clone()
             },
         )

@@ -321,6 +321,23 @@ impl PyRegistration {
         ))
     }
 
+    /// Each placed cloud's pose in cloud 1's frame as a ``.log`` trajectory (the 3DMatch and
+    /// Redwood format): per cloud a line ``k k n`` (index from 0, twice; number of clouds)
+    /// and its 4x4 pose, one row per line; unplaced clouds are left out. Write it to a file
+    /// for the tools that read such trajectories.
+    fn trajectory_log(&self) -> String {
+        mtpcr_core::io::trajectory_log(&self.inner.poses)
+    }
+
+    /// Open3D's pose graph as a dict: one node per cloud (its pose in cloud 1's frame; the
+    /// identity for an unplaced cloud, which no edge touches) and one edge per pair used
+    /// (``transformation`` maps the source cloud into the target's frame; ``information`` is
+    /// the identity). ``json.dump`` it to a file, then ``open3d.io.read_pose_graph``.
+    fn pose_graph<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let graph = mtpcr_core::io::pose_graph_json(&self.inner.poses, &self.inner.edges);
+        crate::convert::json_text_to_py(py, &graph.to_string())
+    }
+
     /// Whether the result can be believed: every pair overlaps and its surfaces lie on each
     /// other at the returned transforms, and every cloud was placed (``verdict`` says why
     /// not).
