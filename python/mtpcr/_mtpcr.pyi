@@ -307,6 +307,7 @@ def register(
     *clouds: ArrayLike,
     seed: int | None = None,
     on_generation: _Callback | None = None,
+    on_pair_screening: Callable[[int, int], bool | None] | None = None,
     config: Config | None = None,
     method: _Method = ...,
     order: _Order = ...,

@@ -335,3 +335,17 @@ def test_poses_are_exported_for_the_next_tool(small_views):
     np.testing.assert_allclose(node2, r.poses[2], atol=1e-12)
     ends = [(e["source_node_id"], e["target_node_id"]) for e in graph["edges"]]
     assert ends == [(e["source"], e["target"]) for e in r.edges]
+
+
+def test_screening_of_clouds_in_no_known_order_reports_progress(small_views):
+    """Four clouds in no known order are screened pair by pair; ``on_pair_screening`` sees
+    the count up to all six pairs, and returning False leaves an incomplete result."""
+    a, b, c = small_views.clouds
+    clouds = (a, b, c, a[::2])
+    calls = []
+    r = mtpcr.register(*clouds, seed=1, on_pair_screening=lambda done, total: calls.append((done, total)))
+    assert r.completed and calls and calls[-1] == (6, 6)
+    r = mtpcr.register(*clouds, seed=1, on_pair_screening=lambda done, total: False)
+    assert not r.completed
+    with pytest.raises(TypeError, match="on_pair_screening must be callable"):
+        mtpcr.register(*clouds, on_pair_screening=3)

@@ -2,7 +2,7 @@
 //! them everywhere.
 
 use indicatif::{ProgressBar, ProgressStyle};
-use mtpcr_core::Progress;
+use mtpcr_core::{Progress, Stage};
 use std::ops::ControlFlow;
 use std::time::Duration;
 
@@ -18,14 +18,15 @@ fn styled(bar: ProgressBar, template: &str, label: &str) -> ProgressBar {
     bar
 }
 
-/// A bar over the generations of one registration run.
+/// A bar over the steps of one registration run: its generations, or the pairs screened
+/// when four or more scans are given in no known order.
 pub fn generation_bar(generations: usize, quiet: bool, label: &str) -> ProgressBar {
     if quiet {
         return ProgressBar::hidden();
     }
     let bar = styled(
         ProgressBar::new(generations as u64),
-        "{prefix} {spinner} [{bar:25}] gen {pos}/{len} {msg} | {elapsed} ETA {eta}",
+        "{prefix} {spinner} [{bar:25}] {pos}/{len} {msg} | {elapsed} ETA {eta}",
         label,
     );
     bar.set_message("preparing the clouds (downsampling, search structures)");
@@ -44,15 +45,23 @@ pub fn run_bar(runs: usize, quiet: bool, label: &str) -> ProgressBar {
     )
 }
 
-/// The observer that moves `bar` after each generation and shows the best original costs
-/// (the second half of the task slots).
+/// The observer that moves `bar` after each generation (showing the best original costs,
+/// the second half of the task slots) or each batch of pairs screened.
 pub fn observe(bar: &ProgressBar) -> impl FnMut(&Progress) -> ControlFlow<()> + '_ {
     move |p: &Progress| {
         bar.set_length(p.generations as u64);
         bar.set_position(p.generation as u64);
-        let original = &p.best_costs[p.best_costs.len() / 2..];
-        let shown: Vec<String> = original.iter().map(|c| format!("{c:.4}")).collect();
-        bar.set_message(format!("best original costs {}", shown.join(" ")));
+        match p.stage {
+            Stage::Generation => {
+                let original = &p.best_costs[p.best_costs.len() / 2..];
+                let shown: Vec<String> = original.iter().map(|c| format!("{c:.4}")).collect();
+                bar.set_message(format!(
+                    "generations, best original costs {}",
+                    shown.join(" ")
+                ));
+            }
+            Stage::PairScreening => bar.set_message("pairs screened for pose hypotheses"),
+        }
         ControlFlow::Continue(())
     }
 }

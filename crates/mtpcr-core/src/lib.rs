@@ -50,7 +50,7 @@ pub mod verdict;
 
 pub use cloud::{PointCloud, Sampling};
 pub use config::{Config, Method, Order};
-pub use ea::{Observer, Progress};
+pub use ea::{Observer, Progress, Stage};
 pub use error::{Error, Result};
 pub use graph::{Edge, ViewGraph};
 pub use interrupt::Interrupt;

@@ -17,6 +17,7 @@
 //!    place is reported unplaced with the failure.
 
 use crate::config::Config;
+use crate::ea::{Observer, Progress, Stage};
 use crate::error::{Error, Result};
 use crate::graph::Edge;
 use crate::loss::Loss;
@@ -67,6 +68,7 @@ pub(crate) fn register_unordered(
     config: &Config,
     pool: &rayon::ThreadPool,
     seed: u64,
+    observer: Option<Observer<'_>>,
 ) -> Result<Registration> {
     let start = std::time::Instant::now();
     if config.hypotheses == 0 {
@@ -75,7 +77,7 @@ pub(crate) fn register_unordered(
             "must be at least 1 to register scans in no known order (or give them in loop order)",
         ));
     }
-    let pairs = screen(prepared, config.hypotheses, pool)?;
+    let (pairs, completed) = screen(prepared, config.hypotheses, pool, observer)?;
     prepared.interrupt().check()?;
     let chosen = choose(&pairs);
     // A verified pose must also pass the verdict's surface test.
@@ -97,9 +99,11 @@ pub(crate) fn register_unordered(
             })
             .collect()
     });
-    finish(
+    let mut result = finish(
         prepared, config, pool, &pairs, &chosen, rejected, seed, start,
-    )
+    )?;
+    result.completed = completed;
+    Ok(result)
 }
 
 /// Placement, refinement and the result, from the screened pairs, the hypothesis chosen for
@@ -468,8 +472,19 @@ fn refine_placed(
     all
 }
 
-/// Every pair's hypotheses, scored by overlap, in parallel (results in pair order).
-fn screen(prepared: &PreparedProblem, count: usize, pool: &rayon::ThreadPool) -> Result<Vec<Pair>> {
+/// Pairs screened in parallel between two progress reports.
+const SCREEN_BATCH: usize = 64;
+
+/// Every pair's hypotheses, scored by overlap and support, in parallel (results in pair
+/// order), in batches of [`SCREEN_BATCH`] pairs with a progress report after each, and
+/// whether every pair was screened: when the observer asks to stop, the pairs not yet
+/// screened are left without hypotheses.
+fn screen(
+    prepared: &PreparedProblem,
+    count: usize,
+    pool: &rayon::ThreadPool,
+    mut observer: Option<Observer<'_>>,
+) -> Result<(Vec<Pair>, bool)> {
     let n = prepared.clouds().len();
     let edges: Vec<Edge> = (0..n)
         .flat_map(|s| {
@@ -479,35 +494,61 @@ fn screen(prepared: &PreparedProblem, count: usize, pool: &rayon::ThreadPool) ->
             })
         })
         .collect();
-    pool.install(|| {
-        edges
-            .par_iter()
-            .map(|&edge| {
-                let loss = prepared.inlier_loss(edge.source, edge.target);
-                let Some((matches, hypotheses)) =
-                    prepared.pair_hypotheses(edge.source, edge.target, count)?
-                else {
-                    return Ok(Pair {
-                        edge,
-                        poses: Vec::new(),
-                        supports: Vec::new(),
-                    });
-                };
-                let mut scored: Vec<(Transform, f64, usize)> = hypotheses
-                    .iter()
-                    .map(|r| {
-                        let pose = r.to_matrix();
-                        (pose, 1.0 - loss.evaluate(r), matches.support(&pose))
-                    })
-                    .collect();
-                scored.sort_by(|a, b| b.1.total_cmp(&a.1));
-                Ok(Pair {
+    let mut pairs = Vec::with_capacity(edges.len());
+    for batch in edges.chunks(SCREEN_BATCH) {
+        let screened: Vec<Pair> = pool.install(|| {
+            batch
+                .par_iter()
+                .map(|&edge| screen_pair(prepared, edge, count))
+                .collect::<Result<_>>()
+        })?;
+        pairs.extend(screened);
+        prepared.interrupt().check()?;
+        if let Some(observer) = observer.as_mut() {
+            let progress = Progress {
+                stage: Stage::PairScreening,
+                generation: pairs.len(),
+                generations: edges.len(),
+                best_costs: Vec::new(),
+                evaluations: pairs.iter().map(|p: &Pair| p.poses.len()).sum(),
+            };
+            if observer(&progress).is_break() {
+                let rest = edges[pairs.len()..].iter().map(|&edge| Pair {
                     edge,
-                    poses: scored.iter().map(|&(p, o, _)| (p, o)).collect(),
-                    supports: scored.iter().map(|&(_, _, s)| s).collect(),
-                })
-            })
-            .collect()
+                    poses: Vec::new(),
+                    supports: Vec::new(),
+                });
+                pairs.extend(rest);
+                return Ok((pairs, false));
+            }
+        }
+    }
+    Ok((pairs, true))
+}
+
+/// One pair's hypotheses with their overlap and support, best overlap first.
+fn screen_pair(prepared: &PreparedProblem, edge: Edge, count: usize) -> Result<Pair> {
+    let loss = prepared.inlier_loss(edge.source, edge.target);
+    let Some((matches, hypotheses)) = prepared.pair_hypotheses(edge.source, edge.target, count)?
+    else {
+        return Ok(Pair {
+            edge,
+            poses: Vec::new(),
+            supports: Vec::new(),
+        });
+    };
+    let mut scored: Vec<(Transform, f64, usize)> = hypotheses
+        .iter()
+        .map(|r| {
+            let pose = r.to_matrix();
+            (pose, 1.0 - loss.evaluate(r), matches.support(&pose))
+        })
+        .collect();
+    scored.sort_by(|a, b| b.1.total_cmp(&a.1));
+    Ok(Pair {
+        edge,
+        poses: scored.iter().map(|&(p, o, _)| (p, o)).collect(),
+        supports: scored.iter().map(|&(_, _, s)| s).collect(),
     })
 }
 

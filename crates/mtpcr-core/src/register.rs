@@ -37,7 +37,7 @@ impl PreparedProblem {
         let pool = thread_pool(config.num_threads)?;
         let graph = self.graph();
         if !graph.is_ring() && graph.edges().len() != 1 {
-            let mut result = register_unordered(self, config, &pool, seed)?;
+            let mut result = register_unordered(self, config, &pool, seed, observer)?;
             result.seconds = start.elapsed().as_secs_f64();
             return Ok(result);
         }

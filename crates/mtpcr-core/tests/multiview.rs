@@ -135,3 +135,28 @@ fn unrelated_clouds_are_not_trusted() {
     assert!(!r.verdict.confident, "{:?}", r.verdict);
     assert!(!r.verdict.reasons.is_empty());
 }
+
+/// Screening a room is the slow part: the observer sees the pairs screened, in order, up to
+/// all of them; asking to stop leaves an incomplete result, not an error.
+#[test]
+fn screening_reports_progress_and_can_be_stopped() {
+    use mtpcr_core::{Progress, Stage};
+    use std::ops::ControlFlow;
+    let v = views_around(13, 5, 2000);
+    let mut seen: Vec<(Stage, usize, usize)> = Vec::new();
+    let mut observer = |p: &Progress| {
+        seen.push((p.stage, p.generation, p.generations));
+        ControlFlow::Continue(())
+    };
+    let r = register(&v.clouds, &config(3), Some(&mut observer)).unwrap();
+    assert!(r.completed);
+    assert_eq!(
+        seen.last(),
+        Some(&(Stage::PairScreening, 10, 10)),
+        "{seen:?}"
+    );
+    assert!(seen.windows(2).all(|w| w[0].1 < w[1].1), "{seen:?}");
+    let mut stop = |_: &Progress| ControlFlow::Break(());
+    let r = register(&v.clouds, &config(3), Some(&mut stop)).unwrap();
+    assert!(!r.completed);
+}

@@ -5,7 +5,7 @@ use crate::convert::{
     cloud_from_py, points_from_py, points_to_py, transform_to_py, transforms_to_py,
 };
 use crate::errors::to_py;
-use mtpcr_core::{Config, Interrupt, Progress, Registration};
+use mtpcr_core::{Config, Interrupt, Progress, Registration, Stage};
 use std::sync::Mutex;
 
 /// How often the waiting thread checks for Ctrl-C.
@@ -33,16 +33,53 @@ fn costs_dict<'py>(
     Ok(dict)
 }
 
-/// Calls the user's `on_generation(generation, best_costs)`; `Ok(false)` asks to stop.
+/// Calls the user's `on_generation(generation, best_costs)` or
+/// `on_pair_screening(screened, total)`, the one for the progress's stage (if given);
+/// `Ok(false)` asks to stop.
 fn call_observer(
     py: Python<'_>,
-    callback: &Py<PyAny>,
+    callbacks: &Callbacks,
     names: &[String],
     progress: &Progress,
 ) -> PyResult<bool> {
-    let costs = costs_dict(py, names, &progress.best_costs)?;
-    let answer = callback.bind(py).call1((progress.generation, costs))?;
+    let answer = match progress.stage {
+        Stage::Generation => match &callbacks.generation {
+            Some(f) => {
+                let costs = costs_dict(py, names, &progress.best_costs)?;
+                f.bind(py).call1((progress.generation, costs))?
+            }
+            None => return Ok(true),
+        },
+        Stage::PairScreening => match &callbacks.pair_screening {
+            Some(f) => f
+                .bind(py)
+                .call1((progress.generation, progress.generations))?,
+            None => return Ok(true),
+        },
+    };
     Ok(answer.is_none() || answer.is_truthy()?)
+}
+
+/// The user's progress callbacks.
+struct Callbacks {
+    generation: Option<Py<PyAny>>,
+    pair_screening: Option<Py<PyAny>>,
+}
+
+/// `f` when it is callable (`None` when absent), else a `TypeError` naming the argument.
+fn callable(f: Option<&Bound<'_, PyAny>>, name: &str) -> PyResult<Option<Py<PyAny>>> {
+    match f {
+        Some(f) if !f.is_none() => {
+            if !f.is_callable() {
+                return Err(PyTypeError::new_err(format!(
+                    "{name} must be callable, got {}",
+                    f.get_type().name()?
+                )));
+            }
+            Ok(Some(f.clone().unbind()))
+        }
+        _ => Ok(None),
+    }
 }
 
 /// Registers overlapping point clouds with no initial guess: ``register(a, b)`` for two
@@ -73,16 +110,22 @@ fn call_observer(
 /// continues. An exception raised by the callback stops the run and propagates, and so does
 /// Ctrl-C (``KeyboardInterrupt``, noticed after the current generation).
 ///
+/// ``on_pair_screening(screened, total)`` is called as four or more clouds given in no
+/// known order are screened pair by pair for pose hypotheses (after each batch of pairs;
+/// the slow part of a whole room); returning ``False`` stops the screening (the pairs not
+/// screened are not used, the result has ``completed=False``).
+///
 /// The GIL is released while the engine runs. Bad clouds or settings raise ``ValueError``
 /// naming the argument or setting; an unknown keyword raises ``TypeError``.
 #[pyfunction]
-#[pyo3(signature = (*clouds, seed=None, on_generation=None, config=None, **settings))]
+#[pyo3(signature = (*clouds, seed=None, on_generation=None, config=None, on_pair_screening=None, **settings))]
 pub(crate) fn register(
     py: Python<'_>,
     clouds: &Bound<'_, PyTuple>,
     seed: Option<&Bound<'_, PyAny>>,
     on_generation: Option<&Bound<'_, PyAny>>,
     config: Option<&Bound<'_, PyAny>>,
+    on_pair_screening: Option<&Bound<'_, PyAny>>,
     settings: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<PyRegistration> {
     let base = base_config(config)?;
@@ -93,17 +136,9 @@ pub(crate) fn register(
         }
     }
     let config = apply_settings(&base, &pairs, "register")?;
-    let callback: Option<Py<PyAny>> = match on_generation {
-        Some(f) if !f.is_none() => {
-            if !f.is_callable() {
-                return Err(PyTypeError::new_err(format!(
-                    "on_generation must be callable, got {}",
-                    f.get_type().name()?
-                )));
-            }
-            Some(f.clone().unbind())
-        }
-        _ => None,
+    let callbacks = Callbacks {
+        generation: callable(on_generation, "on_generation")?,
+        pair_screening: callable(on_pair_screening, "on_pair_screening")?,
     };
     if clouds.len() < 2 {
         return Err(PyTypeError::new_err(format!(
@@ -130,10 +165,10 @@ pub(crate) fn register(
     let outcome = std::thread::scope(|scope| {
         let worker = scope.spawn(|| {
             let mut observer = |progress: &Progress| -> ControlFlow<()> {
-                let Some(f) = &callback else {
+                if callbacks.generation.is_none() && callbacks.pair_screening.is_none() {
                     return ControlFlow::Continue(());
-                };
-                Python::attach(|py| match call_observer(py, f, &names, progress) {
+                }
+                Python::attach(|py| match call_observer(py, &callbacks, &names, progress) {
                     Ok(true) => ControlFlow::Continue(()),
                     Ok(false) => ControlFlow::Break(()),
                     Err(e) => {

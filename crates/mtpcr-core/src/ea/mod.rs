@@ -17,21 +17,33 @@ use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use std::ops::ControlFlow;
 
-/// Reported to the observer after each generation.
+/// Reported to the observer after each generation, or each batch of pairs screened.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Progress {
-    /// Generations finished (1-based, counted across restarts).
+    /// What is being counted.
+    pub stage: Stage,
+    /// Steps finished: generations (1-based, counted across restarts), or pairs screened.
     pub generation: usize,
-    /// Generations of the complete run (all restarts).
+    /// Steps of the complete stage: generations of the run (all restarts), or pairs to screen.
     pub generations: usize,
     /// Best cost of each task of the current evolution, in task-slot order (the order of
-    /// [`ViewGraph::task_names`]).
+    /// [`ViewGraph::task_names`]); empty while screening pairs.
     pub best_costs: Vec<f64>,
     /// Loss evaluations so far.
     pub evaluations: usize,
 }
 
-/// A per-generation callback: return `ControlFlow::Break(())` to stop the run.
+/// The stage a [`Progress`] report counts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stage {
+    /// Generations of the evolution (two or three scans, or scans in loop order).
+    Generation,
+    /// Pairs screened for feature hypotheses (four or more scans in no known order).
+    PairScreening,
+}
+
+/// A progress callback (after each generation, or each batch of pairs screened): return
+/// `ControlFlow::Break(())` to stop the run.
 pub type Observer<'a> = &'a mut dyn FnMut(&Progress) -> ControlFlow<()>;
 
 /// A child is redrawn when it leaves the box by more than this fraction of the upper bound.
@@ -172,6 +184,7 @@ pub(crate) fn end_of_generation(
 ) -> bool {
     history.push(best_costs.clone());
     observer(&Progress {
+        stage: Stage::Generation,
         generation: generation + 1,
         generations,
         best_costs,
