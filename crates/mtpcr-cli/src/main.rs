@@ -63,7 +63,8 @@ enum Command {
     },
     /// Register two point clouds or more and write a results folder.
     ///
-    /// Each file is PLY, PCD, E57 (every scan in it is a cloud), LAS/LAZ or XYZ text. Two
+    /// Each file is PLY, PCD, E57 (every scan in it is a cloud), LAS/LAZ or XYZ text; a
+    /// folder stands for its .ply/.pcd/.e57/.las/.laz/.xyz/.pts files in natural order. Two
     /// clouds give T12; more give each cloud's pose in cloud 1's frame (with --order given:
     /// clouds in loop order, T12, T23, ..., Tn1). The folder holds
     /// result.json, config.toml (the settings, to repeat the run), transforms.txt, poses.log
@@ -72,7 +73,7 @@ enum Command {
     /// clouds in cloud 1's frame, one colour per view), convergence.png, views.png and
     /// view.html (an interactive 3-D view that opens offline).
     Register {
-        /// The point-cloud files (one E57 file of several scans is enough).
+        /// The point-cloud files or folders of them (one E57 file of several scans is enough).
         #[arg(num_args = 1.., required = true, value_name = "CLOUD")]
         clouds: Vec<PathBuf>,
         /// Output folder [default: results/<UTC timestamp>]; must be new or empty unless --force.
@@ -252,6 +253,16 @@ fn register_files(
     let mut config = settings::resolve(run, seed)?;
     config.seed = Some(config.seed.unwrap_or_else(draw_seed));
     interrupt::install()?;
+    // A folder given stands for its point-cloud files, in natural order.
+    let mut files = Vec::with_capacity(inputs.len());
+    for input in inputs {
+        if input.is_dir() {
+            files.extend(mtpcr_core::io::cloud_files_in(input)?);
+        } else {
+            files.push(input.clone());
+        }
+    }
+    let inputs = &files[..];
     // The folder is checked before the (possibly long) reading.
     let dir = output::prepare_output(output, inputs, force)?;
     let (clouds, labels) = match read_clouds(inputs, run.quiet) {

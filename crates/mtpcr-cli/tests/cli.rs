@@ -329,24 +329,21 @@ fn register_writes_every_output_file() {
 
 /// Four or more scans are placed without an evolution (no tasks, no costs to print): the
 /// command must still print every pose and write its folder (it panicked on the cost table).
+/// The scans are given as their folder: its cloud files in natural order.
 #[test]
 fn register_places_four_scans_in_no_known_order() {
     let dir = tempfile::tempdir().unwrap();
+    let scans = dir.path().join("scans");
+    std::fs::create_dir(&scans).unwrap();
     let views = synthetic::views_around(3, 4, 3000);
-    let paths: Vec<PathBuf> = views
-        .clouds
-        .iter()
-        .enumerate()
-        .map(|(i, c)| {
-            let path = dir.path().join(format!("scan{}.ply", i + 1));
-            write_ply(&path, c.points(), None).unwrap();
-            path
-        })
-        .collect();
+    for (i, c) in views.clouds.iter().enumerate() {
+        write_ply(&scans.join(format!("scan{}.ply", i + 1)), c.points(), None).unwrap();
+    }
+    std::fs::write(scans.join("scan1.info.txt"), "not a cloud").unwrap();
     let out = dir.path().join("out");
     let run = mtpcr()
         .arg("register")
-        .args(args_of(&paths))
+        .arg(&scans)
         .args(["-o", out.to_str().unwrap(), "--seed", "1", "-q"])
         .output()
         .unwrap();

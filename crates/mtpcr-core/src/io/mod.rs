@@ -112,6 +112,66 @@ pub fn detect_format(path: impl AsRef<Path>, first_bytes: &[u8]) -> Result<Forma
     }
 }
 
+/// Extensions of the files a folder given as input contributes (text formats `.txt`/`.csv`
+/// are left out: scan folders hold text files that are not clouds, e.g. 3DMatch's
+/// `cloud_bin_k.info.txt`; give such clouds by name).
+const FOLDER_EXTENSIONS: [&str; 7] = ["ply", "pcd", "e57", "las", "laz", "xyz", "pts"];
+
+/// The point-cloud files of a folder (not its subfolders), by extension
+/// (`.ply .pcd .e57 .las .laz .xyz .pts`, any case), in natural order: `cloud_bin_2` before
+/// `cloud_bin_10`. An error names the folder when it cannot be read or holds none.
+pub fn cloud_files_in(dir: &Path) -> Result<Vec<std::path::PathBuf>> {
+    let entries = std::fs::read_dir(dir).map_err(|e| Error::io(dir, e))?;
+    let mut files = Vec::new();
+    for entry in entries {
+        let path = entry.map_err(|e| Error::io(dir, e))?.path();
+        let known = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .is_some_and(|e| FOLDER_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()));
+        if known && path.is_file() {
+            files.push(path);
+        }
+    }
+    if files.is_empty() {
+        return Err(Error::InvalidInput(format!(
+            "folder {} holds no point-cloud files (.{})",
+            dir.display(),
+            FOLDER_EXTENSIONS.join(", .")
+        )));
+    }
+    files.sort_by(|a, b| natural_order(&a.to_string_lossy(), &b.to_string_lossy()));
+    Ok(files)
+}
+
+/// Compares names with runs of digits compared as numbers (`scan2` < `scan10`).
+fn natural_order(a: &str, b: &str) -> std::cmp::Ordering {
+    fn chunks(s: &str) -> Vec<(bool, String)> {
+        let mut out: Vec<(bool, String)> = Vec::new();
+        for c in s.chars() {
+            let digit = c.is_ascii_digit();
+            match out.last_mut() {
+                Some((d, text)) if *d == digit => text.push(c),
+                _ => out.push((digit, c.to_string())),
+            }
+        }
+        out
+    }
+    let (ca, cb) = (chunks(a), chunks(b));
+    for ((da, ta), (db, tb)) in ca.iter().zip(&cb) {
+        let order = if *da && *db {
+            let (na, nb) = (ta.trim_start_matches('0'), tb.trim_start_matches('0'));
+            na.len().cmp(&nb.len()).then_with(|| na.cmp(nb))
+        } else {
+            ta.cmp(tb)
+        };
+        if order != std::cmp::Ordering::Equal {
+            return order;
+        }
+    }
+    ca.len().cmp(&cb.len()).then_with(|| a.cmp(b))
+}
+
 /// The name of the single scan of a non-E57 file: the file's stem.
 fn stem(path: &Path) -> String {
     path.file_stem()
@@ -230,6 +290,38 @@ pub fn matrix_text(t: &Transform) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_folder_gives_its_cloud_files_in_natural_order() {
+        let dir = std::env::temp_dir().join(format!("mtpcr-folder-{}", std::process::id()));
+        std::fs::create_dir_all(dir.join("sub.ply")).unwrap();
+        for name in [
+            "scan10.ply",
+            "scan2.PLY",
+            "scan1.pcd",
+            "scan2.info.txt",
+            "notes.md",
+        ] {
+            std::fs::write(dir.join(name), "x").unwrap();
+        }
+        let names: Vec<String> = cloud_files_in(&dir)
+            .unwrap()
+            .iter()
+            .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+            .collect();
+        assert_eq!(names, ["scan1.pcd", "scan2.PLY", "scan10.ply"]);
+        let empty = dir.join("sub.ply");
+        let e = cloud_files_in(&empty).unwrap_err().to_string();
+        assert!(
+            e.contains("holds no point-cloud files") && e.contains("sub.ply"),
+            "{e}"
+        );
+        let e = cloud_files_in(&dir.join("missing"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("missing"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 
     fn tmp(name: &str) -> std::path::PathBuf {
         let dir = std::env::temp_dir().join(format!("mtpcr-io-mod-{}", std::process::id()));
