@@ -337,7 +337,7 @@ fn register_places_four_scans_in_no_known_order() {
     std::fs::create_dir(&scans).unwrap();
     let views = synthetic::views_around(3, 4, 3000);
     for (i, c) in views.clouds.iter().enumerate() {
-        write_ply(&scans.join(format!("scan{}.ply", i + 1)), c.points(), None).unwrap();
+        write_ply(scans.join(format!("scan{}.ply", i + 1)), c.points(), None).unwrap();
     }
     std::fs::write(scans.join("scan1.info.txt"), "not a cloud").unwrap();
     let out = dir.path().join("out");
