@@ -100,7 +100,8 @@ class Config:
         In 4..=1000000. Paper: 100."""
     @property
     def generations(self) -> int:
-        """Generations after the initial one (`G`), at most 1000000. Paper: 60."""
+        """Generations after the initial one (`G`), at most 1000000; 0: the feature
+        hypotheses, refined, are the answer (needs `hypotheses` > 0). Paper: 60."""
     @property
     def sample_ratio(self) -> float:
         """Fraction of each cloud's points kept by downsampling, in (0, 1]. Paper: 0.05."""
