@@ -205,10 +205,20 @@ fn finish(
         .enumerate()
         .map(|(v, w)| w.map(|w| prepared.to_original(v, 0, &w)))
         .collect();
-    let reasons = unplaced
+    let mut reasons: Vec<String> = unplaced
         .iter()
         .map(|u| format!("cloud {} is not placed", u.view + 1))
         .collect();
+    reasons.extend(
+        unconfirmed(pairs, chosen, &rejected, &refined, tolerance)
+            .into_iter()
+            .map(|v| {
+                format!(
+                    "cloud {} rests on one pair: no second pair confirms its place",
+                    v + 1
+                )
+            }),
+    );
     let verdict = judge(checks, reasons);
     Ok(Registration {
         edges,
@@ -253,6 +263,44 @@ fn measure(
             Some((p, check))
         })
         .unzip()
+}
+
+/// The placed scans (other than scan 0) that fewer than two chosen, not rejected pairs put
+/// where they are (their chosen pose agrees with the placement to [`CONSENSUS_DEGREES`] and
+/// twice the loop tolerance). Such a scan joined by one pair alone: nothing but that pair
+/// says it is right, and on rooms a strong-looking wrong pair placed a fragment upside down
+/// in a run otherwise confident (kitchen, 60 fragments, seed 2: one fragment 174 degrees off).
+fn unconfirmed(
+    pairs: &[Pair],
+    chosen: &[Option<usize>],
+    rejected: &[bool],
+    placed: &[Option<Transform>],
+    tolerance: f64,
+) -> Vec<usize> {
+    let mut agreeing = vec![0usize; placed.len()];
+    for (p, pair) in pairs.iter().enumerate() {
+        let Some(&(own, _)) = chosen[p].and_then(|h| pair.poses.get(h)) else {
+            continue;
+        };
+        let Edge {
+            source: s,
+            target: t,
+        } = pair.edge;
+        let (Some(ws), Some(wt)) = (placed[s], placed[t]) else {
+            continue;
+        };
+        let implied = invert_rigid(&wt) * ws;
+        if !rejected[p]
+            && rotation_error_deg(&implied, &own) < CONSENSUS_DEGREES
+            && translation_error(&implied, &own) < 2.0 * tolerance
+        {
+            agreeing[s] += 1;
+            agreeing[t] += 1;
+        }
+    }
+    (1..placed.len())
+        .filter(|&v| placed[v].is_some() && agreeing[v] < 2)
+        .collect()
 }
 
 /// The scans connected to scan 0 through the `used` pairs (`n >= 1`).
@@ -757,6 +805,37 @@ mod tests {
             assert_eq!(r.verdict.edges.len(), 1);
             assert!(!r.verdict.confident);
         }
+    }
+
+    /// A scan that one pair alone places is placed, but the run is not confident: nothing
+    /// else says that pair is right (a strong wrong pair put a room's fragment upside down).
+    #[test]
+    fn a_scan_placed_by_one_pair_alone_is_not_confident() {
+        let config = Config {
+            num_threads: 1,
+            ..Config::default()
+        };
+        let (prepared, pairs) = problem(33, 4, &config);
+        let r = run(
+            &prepared,
+            &config,
+            &pairs,
+            &choose(&pairs, &[(0, 1), (1, 2), (0, 2), (2, 3)]),
+        );
+        assert!(r.poses.iter().all(Option::is_some), "{:?}", r.unplaced);
+        assert!(!r.verdict.confident);
+        assert_eq!(
+            r.verdict.reasons,
+            ["cloud 4 rests on one pair: no second pair confirms its place"]
+        );
+        // A second pair confirms it.
+        let r = run(
+            &prepared,
+            &config,
+            &pairs,
+            &choose(&pairs, &[(0, 1), (1, 2), (0, 2), (2, 3), (1, 3)]),
+        );
+        assert!(r.verdict.reasons.is_empty(), "{:?}", r.verdict.reasons);
     }
 
     /// A scan placed in the first round by a pair that fails at the refined poses loses its
