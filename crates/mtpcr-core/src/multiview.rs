@@ -30,7 +30,8 @@ use crate::verdict::{
 };
 use rayon::prelude::*;
 
-/// Hypotheses per pair compared around each triangle.
+/// Hypotheses per pair compared around a three-scan loop ([`best_closing_triple`], used for
+/// scans given as one loop).
 const PER_SIDE: usize = 5;
 /// A triangle of poses closes when its loop product turns by less than this...
 const LOOP_DEGREES: f64 = 5.0;
@@ -40,7 +41,7 @@ const LOOP_SHIFT_FRACTION: f64 = 0.05;
 /// well (degrees; translation twice the loop tolerance: each group's poses are composed from
 /// unrefined hypotheses).
 const CONSENSUS_DEGREES: f64 = 10.0;
-/// A verified pair outside the tree is a loop closure when it agrees with the tree's poses
+/// A chosen pair outside the joins is a loop closure when it agrees with the placed poses
 /// this well (degrees; translation as [`LOOP_SHIFT_FRACTION`]).
 const CLOSURE_DEGREES: f64 = 5.0;
 /// ...and overlap at least this much. Weakly overlapping pairs bias the joint ICP: on
@@ -58,7 +59,7 @@ struct Pair {
 }
 
 /// Rounds of placement: a pair whose fit fails at the refined poses is rejected and the
-/// spanning tree built again without it.
+/// groups built again without it.
 const MAX_ROUNDS: usize = 4;
 
 /// Registers the prepared clouds (a general graph; its edges are ignored) as an unordered
@@ -80,7 +81,7 @@ pub(crate) fn register_unordered(
     let (pairs, completed) = screen(prepared, config.hypotheses, pool, observer)?;
     prepared.interrupt().check()?;
     let chosen = choose(&pairs);
-    // A verified pose must also pass the verdict's surface test.
+    // A chosen pose must also pass the verdict's surface test.
     let rejected: Vec<bool> = pool.install(|| {
         (0..pairs.len())
             .into_par_iter()
@@ -107,7 +108,8 @@ pub(crate) fn register_unordered(
 }
 
 /// Placement, refinement and the result, from the screened pairs, the hypothesis chosen for
-/// each (`None`: unverified) and which are rejected (unverified or failing the surface test).
+/// each (`None`: none stands out) and which are rejected (none chosen, or failing the surface
+/// test).
 ///
 /// Invariant (issue 23): a pair is refined, measured or reported only when both its scans
 /// are placed. [`place`] returns only such pairs, and when a scan loses its place (last
