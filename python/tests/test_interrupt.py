@@ -16,7 +16,8 @@ rng = np.random.default_rng(0)
 cloud = rng.normal(size=(400_000, 3))
 print("ready", flush=True)
 # Farthest-point sampling of half of 400k points takes minutes uninterrupted.
-mtpcr.register(cloud, cloud[::2], sample_ratio=0.5, max_sample_points=0, hypotheses=0, generations=8)
+settings = dict(sample_ratio=0.5, max_sample_points=0, hypotheses=0, generations=8)
+mtpcr.register(cloud, cloud[::2], **settings)
 print("finished", flush=True)
 """
 

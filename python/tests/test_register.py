@@ -343,7 +343,11 @@ def test_screening_of_clouds_in_no_known_order_reports_progress(small_views):
     a, b, c = small_views.clouds
     clouds = (a, b, c, a[::2])
     calls = []
-    r = mtpcr.register(*clouds, seed=1, on_pair_screening=lambda done, total: calls.append((done, total)))
+
+    def seen(done, total):
+        calls.append((done, total))
+
+    r = mtpcr.register(*clouds, seed=1, on_pair_screening=seen)
     assert r.completed and calls and calls[-1] == (6, 6)
     r = mtpcr.register(*clouds, seed=1, on_pair_screening=lambda done, total: False)
     assert not r.completed

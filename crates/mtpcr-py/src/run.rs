@@ -118,14 +118,14 @@ fn callable(f: Option<&Bound<'_, PyAny>>, name: &str) -> PyResult<Option<Py<PyAn
 /// The GIL is released while the engine runs. Bad clouds or settings raise ``ValueError``
 /// naming the argument or setting; an unknown keyword raises ``TypeError``.
 #[pyfunction]
-#[pyo3(signature = (*clouds, seed=None, on_generation=None, config=None, on_pair_screening=None, **settings))]
+#[pyo3(signature = (*clouds, seed=None, on_generation=None, on_pair_screening=None, config=None, **settings))]
 pub(crate) fn register(
     py: Python<'_>,
     clouds: &Bound<'_, PyTuple>,
     seed: Option<&Bound<'_, PyAny>>,
     on_generation: Option<&Bound<'_, PyAny>>,
-    config: Option<&Bound<'_, PyAny>>,
     on_pair_screening: Option<&Bound<'_, PyAny>>,
+    config: Option<&Bound<'_, PyAny>>,
     settings: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<PyRegistration> {
     let base = base_config(config)?;
