@@ -416,7 +416,24 @@ pub fn write_results(dir: &Path, rec: &RunRecord<'_>) -> CliResult<Vec<String>> 
     write_atomically(&path("views.png"), |tmp| {
         plots::views_png(&before, &after, &labels, tmp)
     })?;
-    let html = crate::viewer::viewer_html(&before, &after, &labels, "", "mtpcr: registered scans");
+    // The 3-D view shows the placed scans only (an unplaced one has no "after").
+    let placed: Vec<usize> = (0..rec.clouds.len())
+        .filter(|&k| rec.result.poses.get(k).is_some_and(Option::is_some))
+        .collect();
+    let title = match rec.clouds.len() - placed.len() {
+        0 => "mtpcr: registered scans".to_string(),
+        missing => format!("mtpcr: registered scans ({missing} not placed, not shown)"),
+    };
+    let html = crate::viewer::viewer_html(
+        &placed.iter().map(|&k| before[k]).collect::<Vec<_>>(),
+        &placed.iter().map(|&k| after[k]).collect::<Vec<_>>(),
+        &placed
+            .iter()
+            .map(|&k| labels[k].clone())
+            .collect::<Vec<_>>(),
+        "",
+        &title,
+    );
     write_file(&path("view.html"), html.as_bytes())?;
     Ok(OUTPUT_FILES
         .iter()

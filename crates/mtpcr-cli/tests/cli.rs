@@ -360,6 +360,61 @@ fn register_places_four_scans_in_no_known_order() {
     );
 }
 
+/// A scan that cannot be placed is left out of the merged cloud and the 3-D view, and the
+/// command still writes every file (the view's writer panicked on it).
+#[test]
+fn register_writes_its_files_when_a_scan_is_not_placed() {
+    let dir = tempfile::tempdir().unwrap();
+    let views = synthetic::views_around(14, 5, 4000);
+    // Another object of the same size: the near half of a wavy torus.
+    let stranger: Vec<[f64; 3]> = (0..4000)
+        .map(|i| {
+            let (u, v) = (
+                (i as f64 * 0.618_034).fract() * std::f64::consts::TAU,
+                (i as f64 / 4000.0) * std::f64::consts::PI,
+            );
+            let r = 0.02 + 0.004 * (5.0 * u).sin();
+            [
+                (0.05 + r * v.cos()) * u.cos(),
+                (0.05 + r * v.cos()) * u.sin(),
+                r * v.sin(),
+            ]
+        })
+        .collect();
+    let mut paths = Vec::new();
+    for (i, c) in views.clouds.iter().enumerate() {
+        let path = dir.path().join(format!("scan{}.ply", i + 1));
+        write_ply(&path, c.points(), None).unwrap();
+        paths.push(path);
+    }
+    let odd = dir.path().join("stranger.ply");
+    write_ply(&odd, &stranger, None).unwrap();
+    paths.insert(2, odd);
+    let out = dir.path().join("out");
+    let run = mtpcr()
+        .arg("register")
+        .args(args_of(&paths))
+        .args(["-o", out.to_str().unwrap(), "--seed", "1", "-q"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert_eq!(run.status.code(), Some(3), "not confident: {stderr}");
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(stdout.contains("cloud 3 NOT PLACED"), "{stdout}");
+    let html = std::fs::read_to_string(out.join("view.html")).unwrap();
+    assert!(
+        html.contains("not placed"),
+        "the view says what it leaves out"
+    );
+    assert!(
+        !html.contains("stranger.ply"),
+        "the unplaced scan is not drawn"
+    );
+    let merged = read_ply(out.join("merged.ply")).unwrap();
+    assert_eq!(merged.len(), 5 * 4000);
+}
+
 /// The names in a folder.
 fn file_names(dir: &Path) -> Vec<String> {
     std::fs::read_dir(dir)
