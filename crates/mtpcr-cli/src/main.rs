@@ -599,14 +599,7 @@ fn eval_views(
         let placed: Vec<f64> = scores.rot_deg.iter().flatten().copied().collect();
         let worst = placed.iter().copied().fold(0.0, f64::max);
         let mean = placed.iter().sum::<f64>() / placed.len().max(1) as f64;
-        let errors: Vec<(f64, f64)> = scores
-            .rot_deg
-            .iter()
-            .zip(&scores.translation)
-            .filter_map(|(r, t)| Some(((*r)?, (*t)?)))
-            .collect();
         let bounds = problem.pair_success;
-        let count = |f: &dyn Fn(&(f64, f64)) -> bool| errors.iter().filter(|e| f(e)).count();
         let run = ViewRun {
             seed: s,
             success: scores.success,
@@ -615,9 +608,9 @@ fn eval_views(
             worst,
             mean,
             seconds: result.seconds,
-            wrong: count(&|&(r, t)| r >= bounds.degrees || t >= bounds.translation),
-            within_degrees: WITHIN_DEGREES.map(|d| count(&|&(r, _)| r < d)),
-            within_translation: WITHIN_TRANSLATION.map(|d| count(&|&(_, t)| t < d)),
+            wrong: scores.wrong(bounds.degrees, bounds.translation),
+            within_degrees: WITHIN_DEGREES.map(|d| scores.within_degrees(d)),
+            within_translation: WITHIN_TRANSLATION.map(|d| scores.within_translation(d)),
             pairs,
         };
         if !quiet {

@@ -58,6 +58,17 @@ struct Pair {
     supports: Vec<usize>,
 }
 
+impl Pair {
+    /// A pair without hypotheses (not screened, or prepared without features).
+    fn unmatched(edge: Edge) -> Pair {
+        Pair {
+            edge,
+            poses: Vec::new(),
+            supports: Vec::new(),
+        }
+    }
+}
+
 /// Rounds of placement: a pair whose fit fails at the refined poses is rejected and the
 /// groups built again without it.
 const MAX_ROUNDS: usize = 4;
@@ -267,6 +278,70 @@ fn measure(
         .unzip()
 }
 
+/// The pose of group `a`'s frame relative to the other group's, `T_ab` (b's frame into a's),
+/// implied by pair `p` (pose `t_ts`, source into target) joining them; `frame` holds each
+/// scan's pose in its group's frame.
+fn group_pose(
+    pairs: &[Pair],
+    group: &[usize],
+    frame: &[Transform],
+    p: usize,
+    t_ts: &Transform,
+    a: usize,
+) -> Transform {
+    let Edge {
+        source: s,
+        target: t,
+    } = pairs[p].edge;
+    let t_st = frame[s] * invert_rigid(t_ts) * invert_rigid(&frame[t]);
+    if group[s] == a {
+        t_st
+    } else {
+        invert_rigid(&t_st)
+    }
+}
+
+/// Whether the chosen pairs between groups `a` and `b` confirm their join `t_ab` (see
+/// [`place`]): at least two agree, touching two scans of each group, and the agreeing pairs
+/// explain more matches than those that disagree.
+fn loop_closes(
+    pairs: &[Pair],
+    order: &[(usize, Transform, usize)],
+    group: &[usize],
+    frame: &[Transform],
+    (a, b): (usize, usize),
+    t_ab: &Transform,
+    tolerance: f64,
+) -> bool {
+    let (mut for_it, mut against) = (0usize, 0usize);
+    let (mut ends_a, mut ends_b, mut agreeing) = (Vec::new(), Vec::new(), 0);
+    for &(q, t_q, support) in order {
+        let Edge {
+            source: u,
+            target: v,
+        } = pairs[q].edge;
+        let (gu, gv) = (group[u], group[v]);
+        if !((gu == a && gv == b) || (gu == b && gv == a)) {
+            continue;
+        }
+        let x = group_pose(pairs, group, frame, q, &t_q, a);
+        if agree(&x, t_ab, CONSENSUS_DEGREES, 2.0 * tolerance) {
+            for_it += support;
+            agreeing += 1;
+            let (in_a, in_b) = if gu == a { (u, v) } else { (v, u) };
+            ends_a.push(in_a);
+            ends_b.push(in_b);
+        } else {
+            against += support;
+        }
+    }
+    for ends in [&mut ends_a, &mut ends_b] {
+        ends.sort_unstable();
+        ends.dedup();
+    }
+    agreeing >= 2 && ends_a.len() >= 2 && ends_b.len() >= 2 && for_it > against
+}
+
 /// The placed scans (other than scan 0) that fewer than two chosen, not rejected pairs put
 /// where they are (their chosen pose agrees with the placement to [`CONSENSUS_DEGREES`] and
 /// twice the loop tolerance). Such a scan joined by one pair alone: nothing but that pair
@@ -292,10 +367,7 @@ fn unconfirmed(
             continue;
         };
         let implied = invert_rigid(&wt) * ws;
-        if !rejected[p]
-            && rotation_error_deg(&implied, &own) < CONSENSUS_DEGREES
-            && translation_error(&implied, &own) < 2.0 * tolerance
-        {
+        if !rejected[p] && agree(&implied, &own, CONSENSUS_DEGREES, 2.0 * tolerance) {
             agreeing[s] += 1;
             agreeing[t] += 1;
         }
@@ -362,20 +434,6 @@ fn place(
     let mut frame: Vec<Transform> = vec![Transform::identity(); n];
     let mut members: Vec<Vec<usize>> = (0..n).map(|v| vec![v]).collect();
     let mut joining: Vec<usize> = Vec::new();
-    // The pose of group `b`'s frame in group `a`'s frame implied by a pair s -> t (pose
-    // `t_ts`) with s in a and t in b (or the other way round).
-    let implied = |group: &[usize], frame: &[Transform], p: usize, t_ts: &Transform, a: usize| {
-        let Edge {
-            source: s,
-            target: t,
-        } = pairs[p].edge;
-        let t_ab = frame[s] * invert_rigid(t_ts) * invert_rigid(&frame[t]);
-        if group[s] == a {
-            t_ab
-        } else {
-            invert_rigid(&t_ab)
-        }
-    };
     for &(p, t_ts, _) in &order {
         let Edge {
             source: s,
@@ -385,39 +443,12 @@ fn place(
         if a == b {
             continue;
         }
-        let t_ab = implied(&group, &frame, p, &t_ts, a);
-        if members[a].len() > 1 && members[b].len() > 1 {
-            let (mut agree, mut disagree) = (0usize, 0usize);
-            let (mut ends_a, mut ends_b, mut agreeing) = (Vec::new(), Vec::new(), 0);
-            for &(q, t_q, support) in &order {
-                let Edge {
-                    source: u,
-                    target: v,
-                } = pairs[q].edge;
-                let (gu, gv) = (group[u], group[v]);
-                if !((gu == a && gv == b) || (gu == b && gv == a)) {
-                    continue;
-                }
-                let x = implied(&group, &frame, q, &t_q, a);
-                if rotation_error_deg(&x, &t_ab) < CONSENSUS_DEGREES
-                    && translation_error(&x, &t_ab) < 2.0 * tolerance
-                {
-                    agree += support;
-                    agreeing += 1;
-                    let (in_a, in_b) = if gu == a { (u, v) } else { (v, u) };
-                    ends_a.push(in_a);
-                    ends_b.push(in_b);
-                } else {
-                    disagree += support;
-                }
-            }
-            for ends in [&mut ends_a, &mut ends_b] {
-                ends.sort_unstable();
-                ends.dedup();
-            }
-            if !(agreeing >= 2 && ends_a.len() >= 2 && ends_b.len() >= 2 && agree > disagree) {
-                continue;
-            }
+        let t_ab = group_pose(pairs, &group, &frame, p, &t_ts, a);
+        if members[a].len() > 1
+            && members[b].len() > 1
+            && !loop_closes(pairs, &order, &group, &frame, (a, b), &t_ab, tolerance)
+        {
+            continue;
         }
         let moved = std::mem::take(&mut members[b]);
         for &m in &moved {
@@ -462,9 +493,7 @@ fn place(
         } = pairs[p].edge;
         if let (Some(ws), Some(wt)) = (poses[s], poses[t]) {
             let implied = invert_rigid(&wt) * ws;
-            if rotation_error_deg(&implied, &own) < CLOSURE_DEGREES
-                && translation_error(&implied, &own) < tolerance
-            {
+            if agree(&implied, &own, CLOSURE_DEGREES, tolerance) {
                 used.push(p);
             }
         }
@@ -563,11 +592,9 @@ fn screen(
                 evaluations: pairs.iter().map(|p: &Pair| p.poses.len()).sum(),
             };
             if observer(&progress).is_break() {
-                let rest = edges[pairs.len()..].iter().map(|&edge| Pair {
-                    edge,
-                    poses: Vec::new(),
-                    supports: Vec::new(),
-                });
+                let rest = edges[pairs.len()..]
+                    .iter()
+                    .map(|&edge| Pair::unmatched(edge));
                 pairs.extend(rest);
                 return Ok((pairs, false));
             }
@@ -581,11 +608,7 @@ fn screen_pair(prepared: &PreparedProblem, edge: Edge, count: usize) -> Result<P
     let loss = prepared.inlier_loss(edge.source, edge.target);
     let Some((matches, hypotheses)) = prepared.pair_hypotheses(edge.source, edge.target, count)?
     else {
-        return Ok(Pair {
-            edge,
-            poses: Vec::new(),
-            supports: Vec::new(),
-        });
+        return Ok(Pair::unmatched(edge));
     };
     let mut scored: Vec<(Transform, f64, usize)> = hypotheses
         .iter()
@@ -638,9 +661,7 @@ pub(crate) fn best_closing_triple(
         for (b, (t_kj, ob)) in jk.iter().take(PER_SIDE).enumerate() {
             let via_j = t_kj * t_ji;
             for (c, (t_ki, oc)) in ik.iter().take(PER_SIDE).enumerate() {
-                if rotation_error_deg(&via_j, t_ki) < LOOP_DEGREES
-                    && translation_error(&via_j, t_ki) < tolerance
-                {
+                if agree(&via_j, t_ki, LOOP_DEGREES, tolerance) {
                     let score = oa + ob + oc;
                     if best.is_none_or(|(s, _)| score > s) {
                         best = Some((score, [a, b, c]));
@@ -650,6 +671,11 @@ pub(crate) fn best_closing_triple(
         }
     }
     best
+}
+
+/// Whether two poses agree: rotations within `degrees`, translations within `shift`.
+fn agree(a: &Transform, b: &Transform, degrees: f64, shift: f64) -> bool {
+    rotation_error_deg(a, b) < degrees && translation_error(a, b) < shift
 }
 
 /// The loop-closing tolerance on translations for a problem (a fraction of its shift).

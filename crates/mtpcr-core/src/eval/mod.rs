@@ -128,6 +128,33 @@ pub struct PoseScores {
     pub success: bool,
 }
 
+impl PoseScores {
+    /// The (rotation degrees, translation) errors of the placed scans.
+    fn placed(&self) -> impl Iterator<Item = (f64, f64)> + '_ {
+        self.rot_deg
+            .iter()
+            .zip(&self.translation)
+            .filter_map(|(r, t)| Some(((*r)?, (*t)?)))
+    }
+
+    /// Placed scans off by at least `degrees` or at least `translation` (data units).
+    pub fn wrong(&self, degrees: f64, translation: f64) -> usize {
+        self.placed()
+            .filter(|&(r, t)| r >= degrees || t >= translation)
+            .count()
+    }
+
+    /// Placed scans whose rotation error is below `degrees`.
+    pub fn within_degrees(&self, degrees: f64) -> usize {
+        self.placed().filter(|&(r, _)| r < degrees).count()
+    }
+
+    /// Placed scans whose translation error is below `translation` (data units).
+    pub fn within_translation(&self, translation: f64) -> usize {
+        self.placed().filter(|&(_, t)| t < translation).count()
+    }
+}
+
 /// Scores estimated poses (scan k into scan 0's frame) against ground-truth scan-to-world
 /// poses; `diagonal` scales the translation errors.
 pub fn score_poses(
