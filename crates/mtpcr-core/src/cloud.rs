@@ -30,6 +30,8 @@ pub const PLANAR_RATIO: f64 = 1e-6;
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct PointCloud {
     points: Vec<[f64; 3]>,
+    /// Where the scanner stood, when known (see [`PointCloud::with_viewpoint`]).
+    viewpoint: Option<[f64; 3]>,
 }
 
 /// How a cloud is downsampled before registration.
@@ -45,7 +47,26 @@ pub enum Sampling {
 impl PointCloud {
     /// A cloud from its points (not validated; see [`PointCloud::validate`]).
     pub fn new(points: Vec<[f64; 3]>) -> Self {
-        PointCloud { points }
+        PointCloud {
+            points,
+            viewpoint: None,
+        }
+    }
+
+    /// The cloud with the position of the scanner that saw it (in the cloud's frame): a
+    /// depth camera's centre, a laser scanner's origin. The registration then also checks
+    /// free space: a right pose never puts one scan's surface where the other scanner saw
+    /// through. Without one, that check is absent.
+    pub fn with_viewpoint(self, viewpoint: [f64; 3]) -> Self {
+        PointCloud {
+            viewpoint: Some(viewpoint),
+            ..self
+        }
+    }
+
+    /// The scanner's position, when known.
+    pub fn viewpoint(&self) -> Option<[f64; 3]> {
+        self.viewpoint
     }
 
     /// A cloud from a flat `[x0, y0, z0, x1, ...]` slice; its length must be a multiple of 3.
@@ -56,9 +77,9 @@ impl PointCloud {
                 coords.len()
             )));
         }
-        Ok(PointCloud {
-            points: coords.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
-        })
+        Ok(PointCloud::new(
+            coords.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+        ))
     }
 
     /// The points.
@@ -220,12 +241,10 @@ impl PointCloud {
 
     /// The cloud translated by `v`.
     pub fn translated(&self, v: [f64; 3]) -> PointCloud {
+        let shift = |p: &[f64; 3]| [p[0] + v[0], p[1] + v[1], p[2] + v[2]];
         PointCloud {
-            points: self
-                .points
-                .iter()
-                .map(|p| [p[0] + v[0], p[1] + v[1], p[2] + v[2]])
-                .collect(),
+            points: self.points.iter().map(shift).collect(),
+            viewpoint: self.viewpoint.as_ref().map(shift),
         }
     }
 
@@ -234,6 +253,7 @@ impl PointCloud {
         let r = Rigid::from_matrix(t);
         PointCloud {
             points: self.points.iter().map(|p| r.apply(p)).collect(),
+            viewpoint: self.viewpoint.map(|v| r.apply(&v)),
         }
     }
 
@@ -241,6 +261,7 @@ impl PointCloud {
     pub fn select(&self, indices: &[usize]) -> PointCloud {
         PointCloud {
             points: indices.iter().map(|&i| self.points[i]).collect(),
+            viewpoint: self.viewpoint,
         }
     }
 
@@ -409,7 +430,13 @@ impl PointCloud {
             .map(|(p, _)| *p)
             .collect();
         let removed = self.points.len() - kept.len();
-        (PointCloud { points: kept }, removed)
+        (
+            PointCloud {
+                points: kept,
+                viewpoint: self.viewpoint,
+            },
+            removed,
+        )
     }
 
     /// The noise protocol of the paper: centre the cloud, divide by its largest absolute
@@ -447,7 +474,10 @@ impl PointCloud {
                 q
             })
             .collect();
-        Ok(PointCloud { points })
+        Ok(PointCloud {
+            points,
+            viewpoint: self.viewpoint,
+        })
     }
 }
 
