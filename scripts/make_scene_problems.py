@@ -206,6 +206,8 @@ def main(argv: list[str] | None = None) -> int:
             # scored by `mtpcr eval` from the returned poses (the benchmarks' criterion)
             p["pair_sets"] = sets
             p["pair_success"] = {"degrees": 15.0, "translation": 0.3}
+        # each fragment lies in its reference camera's frame: the free-space check's viewpoint
+        p["viewpoints"] = "origin"
     out.mkdir(parents=True, exist_ok=True)
     for p, t, check in zip(problems, targets, checks):
         write_json(t, p)

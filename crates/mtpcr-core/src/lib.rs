@@ -34,6 +34,7 @@ mod ea;
 pub mod error;
 pub mod eval;
 pub mod features;
+mod freespace;
 pub mod graph;
 pub mod interrupt;
 pub mod io;

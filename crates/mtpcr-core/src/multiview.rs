@@ -26,7 +26,7 @@ use crate::refine::refine_poses;
 use crate::result::{EdgeEstimate, Registration, Unplaced};
 use crate::se3::{invert_rigid, rotation_error_deg, translation_error, Rigid, Transform};
 use crate::verdict::{
-    check_edge, doubts, judge, EdgeCheck, MAX_RESIDUAL, MIN_OVERLAP, MIN_SUPPORT, RIVAL_RATIO,
+    check_edge, doubts, judge, EdgeCheck, MAX_FREE_SPACE, MAX_RESIDUAL, MIN_OVERLAP, MIN_SUPPORT, RIVAL_RATIO,
 };
 use rayon::prelude::*;
 
@@ -92,7 +92,7 @@ pub(crate) fn register_unordered(
     let (pairs, completed) = screen(prepared, config.hypotheses, pool, observer)?;
     prepared.interrupt().check()?;
     let chosen = choose(&pairs);
-    // A chosen pose must also pass the verdict's surface test.
+    // A chosen pose must also pass the verdict's surface and free-space tests.
     let rejected: Vec<bool> = pool.install(|| {
         (0..pairs.len())
             .into_par_iter()
@@ -100,13 +100,10 @@ pub(crate) fn register_unordered(
                 chosen[p]
                     .and_then(|h| pairs[p].poses.get(h))
                     .is_none_or(|(pose, _)| {
-                        let c = check_edge(
-                            prepared.refine_clouds(),
-                            pairs[p].edge,
-                            &Rigid::from_matrix(pose),
-                            prepared.eps(),
-                        );
-                        !(c.overlap >= MIN_OVERLAP && c.residual <= MAX_RESIDUAL)
+                        let c = check_edge(prepared, pairs[p].edge, &Rigid::from_matrix(pose));
+                        !(c.overlap >= MIN_OVERLAP
+                            && c.residual <= MAX_RESIDUAL
+                            && c.free_space.is_none_or(|f| f <= MAX_FREE_SPACE))
                     })
             })
             .collect()
@@ -268,10 +265,9 @@ fn measure(
             let edge = pairs[p].edge;
             let (ws, wt) = (placed[edge.source]?, placed[edge.target]?);
             let check = check_edge(
-                prepared.refine_clouds(),
+                prepared,
                 edge,
                 &Rigid::from_matrix(&(invert_rigid(&wt) * ws)),
-                prepared.eps(),
             );
             Some((p, check))
         })

@@ -5,6 +5,7 @@
 use crate::cloud::{PointCloud, Sampling};
 use crate::config::{Config, Order};
 use crate::error::{Error, Result};
+use crate::freespace::{violation, FreeSpace};
 use crate::features::{describe, FeatureConfig, Features, PairMatches};
 use crate::graph::ViewGraph;
 use crate::interrupt::Interrupt;
@@ -12,6 +13,7 @@ use crate::loss::{CappedDistanceLoss, InlierLoss, Loss};
 use crate::refine::RefineCloud;
 use crate::se3::{translation, Rigid, Transform};
 use crate::search::{IndexedCloud, SearchMethod};
+use crate::verdict::MAX_FREE_SPACE;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use std::time::Instant;
@@ -41,6 +43,8 @@ pub struct PreparedProblem {
     aiding_cap_ratio: f64,
     /// Keypoint features of each centred full-resolution cloud (only with hypotheses).
     features: Option<(FeatureConfig, Vec<Features>)>,
+    /// What each scanner saw through (centred frames); empty when no scan has a viewpoint.
+    free_space: Vec<FreeSpace>,
     feature_voxel_ratio: f64,
     /// Checked between the steps of preparing and registering.
     interrupt: Interrupt,
@@ -211,8 +215,24 @@ impl PreparedProblem {
         } else {
             None
         };
+        let free_space = if clouds.iter().any(|c| c.viewpoint().is_some()) {
+            pool.install(|| {
+                use rayon::prelude::*;
+                clouds
+                    .par_iter()
+                    .zip(&centroids)
+                    .map(|(c, m)| {
+                        let c = c.translated([-m[0], -m[1], -m[2]]);
+                        FreeSpace::new(c.points(), c.viewpoint())
+                    })
+                    .collect()
+            })
+        } else {
+            Vec::new()
+        };
         Ok(PreparedProblem {
             graph,
+            free_space,
             clouds: indexed,
             full,
             centroids,
@@ -338,7 +358,8 @@ impl PreparedProblem {
     }
 
     /// The descriptor matches of a pair and its candidate poses from them (centred frames,
-    /// at most `count`, best first); `None` without features.
+    /// at most `count`, best first, those keeping out of free space); `None` without
+    /// features.
     pub(crate) fn pair_hypotheses(
         &self,
         source: usize,
@@ -354,12 +375,32 @@ impl PreparedProblem {
         };
         let (s, t) = (&features[source], &features[target]);
         let matches = PairMatches::new(s, t, &config)?;
-        let poses = matches
+        let poses: Vec<Rigid> = matches
             .candidates(s, t)
             .iter()
             .map(|c| Rigid::from_matrix(&c.t_target_source))
             .collect();
-        Ok(Some((matches, poses)))
+        // With viewpoints, a pose that puts a surface where a scanner saw through is no
+        // hypothesis (kept only when every one does, for the verdict to say so).
+        let clear: Vec<Rigid> = poses
+            .iter()
+            .filter(|r| {
+                self.free_space_violation(source, target, r)
+                    .is_none_or(|v| v <= MAX_FREE_SPACE)
+            })
+            .copied()
+            .collect();
+        Ok(Some((matches, if clear.is_empty() { poses } else { clear })))
+    }
+
+    /// The share of one scan's points that `t` (cloud `s` -> cloud `d`, centred frames) puts
+    /// where the other's scanner saw through (see [`crate::freespace`]); `None` without
+    /// viewpoints.
+    pub(crate) fn free_space_violation(&self, s: usize, d: usize, t: &Rigid) -> Option<f64> {
+        if self.free_space.is_empty() {
+            return None;
+        }
+        violation(&self.free_space[s], &self.free_space[d], t)
     }
 
     /// `t` (cloud `s` -> cloud `d`, original frames) in the centred frames.

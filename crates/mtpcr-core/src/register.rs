@@ -144,7 +144,7 @@ impl PreparedProblem {
             .zip(&centred)
             .zip(matches.iter().zip(&hypotheses))
             .map(|((e, t), (m, h))| {
-                let check = check_edge(self.refine_clouds(), *e, t, self.eps());
+                let check = check_edge(self, *e, t);
                 // A pair alone has nothing else to verify it; in a loop, the loop does (an
                 // edge found through the loop may explain fewer matches than a wrong pose).
                 match m {

@@ -10,7 +10,7 @@
 //!   (residual ~ 0.4, uniform within eps).
 
 use crate::graph::Edge;
-use crate::refine::RefineCloud;
+use crate::problem::PreparedProblem;
 use crate::se3::Rigid;
 use kiddo::SquaredEuclidean;
 
@@ -51,6 +51,14 @@ pub const MIN_SUPPORT: usize = 25;
 /// (an edge found through the loop may explain fewer matches than a wrong pose of the pair).
 pub const RIVAL_RATIO: f64 = 2.0;
 
+/// An edge is trusted only if at most this share of one scan's points (among those in front
+/// of or on the other's surface, seen from the other's viewpoint) lies where the other
+/// scanner saw through ([`crate::freespace`]; only with viewpoints). Measured on the
+/// hypotheses of 1084 3DMatch and 3DLoMatch pairs of the kitchen and the lab (8506 poses):
+/// right poses median 0.01, 95th percentile 0.14; wrong ones 5th percentile 0.10, median
+/// 0.34; with this limit 4.5 % of right poses and 90 % of wrong ones are rejected.
+pub const MAX_FREE_SPACE: f64 = 0.15;
+
 /// The measures of one edge at the returned transform.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct EdgeCheck {
@@ -69,8 +77,12 @@ pub struct EdgeCheck {
     /// Descriptor matches of the pair that the transform explains (see
     /// [`crate::features::PairMatches::support`]); `None` without feature matching.
     pub support: Option<usize>,
-    /// The most matches explained by a feature hypothesis that is a different pose.
+    /// The most matches explained by a feature hypothesis that is a different pose (and
+    /// keeps out of free space, with viewpoints).
     pub rival_support: Option<usize>,
+    /// The share of one scan's points put where the other scanner saw through (the larger
+    /// direction; see [`MAX_FREE_SPACE`]); `None` without viewpoints.
+    pub free_space: Option<f64>,
 }
 
 /// The judgement of a registration.
@@ -86,11 +98,11 @@ pub struct Verdict {
 
 /// Measures `edge` at its transform `t_target_source` (centred frames).
 pub(crate) fn check_edge(
-    clouds: &[RefineCloud],
+    prepared: &PreparedProblem,
     edge: Edge,
     t_target_source: &Rigid,
-    eps: f64,
 ) -> EdgeCheck {
+    let (clouds, eps) = (prepared.refine_clouds(), prepared.eps());
     let one_way = |s: usize, t: usize, to_t: Rigid| -> (usize, usize, Vec<f64>) {
         let (src, dst) = (&clouds[s], &clouds[t]);
         let mut residuals = Vec::new();
@@ -125,6 +137,7 @@ pub(crate) fn check_edge(
             / eps,
         support: None,
         rival_support: None,
+        free_space: prepared.free_space_violation(edge.source, edge.target, t_target_source),
     }
 }
 
@@ -165,6 +178,12 @@ pub(crate) fn doubts(edges: &[EdgeCheck]) -> Vec<Option<String>> {
                 Some(format!(
                     "clouds {name} lie on each other {:.0} times less closely than each scan on itself (at most {SELF_RESIDUAL_RATIO} expected): near, but not the same surface",
                     e.residual / e.self_residual.max(f64::MIN_POSITIVE)
+                ))
+            } else if let Some(free) = e.free_space.filter(|&f| f > MAX_FREE_SPACE) {
+                Some(format!(
+                    "clouds {name}: {:.0} % of one scan's points lie where the other scanner saw through (at most {:.0} % expected): the surfaces cannot both be there",
+                    100.0 * free,
+                    100.0 * MAX_FREE_SPACE
                 ))
             } else if let Some(support) = e.support.filter(|&s| s < MIN_SUPPORT) {
                 Some(format!(
@@ -214,7 +233,23 @@ mod tests {
             self_residual,
             support: None,
             rival_support: None,
+            free_space: None,
         }
+    }
+
+    #[test]
+    fn a_pose_that_puts_a_surface_in_free_space_is_doubted() {
+        let d = |free: Option<f64>| {
+            doubts(&[EdgeCheck {
+                free_space: free,
+                ..edge(0.5, 0.05, 0.03)
+            }])
+            .remove(0)
+        };
+        assert_eq!(d(None), None);
+        assert_eq!(d(Some(MAX_FREE_SPACE)), None);
+        let why = d(Some(0.4)).unwrap();
+        assert!(why.contains("40 % of one scan's points"), "{why}");
     }
 
     #[test]

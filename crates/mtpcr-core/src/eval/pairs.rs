@@ -407,7 +407,11 @@ impl FragmentCache {
         use std::collections::hash_map::Entry;
         Ok(match self.clouds.entry(k) {
             Entry::Occupied(known) => known.into_mut(),
-            Entry::Vacant(slot) => slot.insert(read_points(benchmark.fragment_path(scene, k))?),
+            // 3DMatch fragments lie in their reference camera's frame (every point
+            // 0.5-3.5 m in front of it): the viewpoint is the origin.
+            Entry::Vacant(slot) => slot.insert(
+                read_points(benchmark.fragment_path(scene, k))?.with_viewpoint([0.0; 3]),
+            ),
         })
     }
 }

@@ -31,6 +31,9 @@ pub struct Problem {
     pub pair_sets: Vec<PairSet>,
     /// When a pair of [`Problem::pair_sets`] counts as recovered.
     pub pair_success: PairSuccess,
+    /// Where each scan's scanner stood, in the scan's frame (`viewpoints` in the file: the
+    /// string `"origin"`, or one `[x, y, z]` or `null` per scan; `None` when absent).
+    pub viewpoints: Vec<Option<[f64; 3]>>,
 }
 
 /// A named list of scan pairs of a problem.
@@ -69,6 +72,14 @@ struct ProblemFile {
     #[serde(default)]
     pair_sets: std::collections::BTreeMap<String, Vec<(usize, usize)>>,
     pair_success: Option<PairSuccess>,
+    viewpoints: Option<ViewpointsField>,
+}
+
+#[derive(serde::Deserialize)]
+#[serde(untagged)]
+enum ViewpointsField {
+    Named(String),
+    Each(Vec<Option<[f64; 3]>>),
 }
 
 impl Problem {
@@ -140,6 +151,25 @@ impl Problem {
                 "pair_success needs positive degrees and translation".to_string(),
             ));
         }
+        let viewpoints = match file.viewpoints {
+            None => vec![None; n],
+            Some(ViewpointsField::Named(w)) if w == "origin" => vec![Some([0.0; 3]); n],
+            Some(ViewpointsField::Named(w)) => {
+                return Err(Error::malformed(
+                    path,
+                    format!("viewpoints must be \"origin\" or one [x, y, z] or null per scan, got \"{w}\""),
+                ))
+            }
+            Some(ViewpointsField::Each(v)) => {
+                if v.len() != n || v.iter().flatten().flatten().any(|x| !x.is_finite()) {
+                    return Err(Error::malformed(
+                        path,
+                        format!("viewpoints must list one finite [x, y, z] or null per scan ({n} scans, {} given)", v.len()),
+                    ));
+                }
+                v
+            }
+        };
         Ok(Problem {
             name: file.name,
             scans: file.scans.iter().map(|s| root.join(s)).collect(),
@@ -147,6 +177,7 @@ impl Problem {
             notes,
             pair_sets,
             pair_success,
+            viewpoints,
         })
     }
 
@@ -161,9 +192,20 @@ impl Problem {
         Ok(self.graph()?.edge_transforms(&self.poses))
     }
 
-    /// Reads the scans (any format of [`crate::io::read_points`]).
+    /// Reads the scans (any format of [`crate::io::read_points`]), with the problem's
+    /// viewpoints where it gives them.
     pub fn read_scans(&self) -> Result<Vec<PointCloud>> {
-        self.scans.iter().map(read_points).collect()
+        self.scans
+            .iter()
+            .zip(&self.viewpoints)
+            .map(|(path, v)| {
+                let cloud = read_points(path)?;
+                Ok(match v {
+                    Some(v) => cloud.with_viewpoint(*v),
+                    None => cloud,
+                })
+            })
+            .collect()
     }
 }
 

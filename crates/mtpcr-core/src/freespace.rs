@@ -1,0 +1,205 @@
+//! Free space: where a scanner saw through. A scanner that saw a surface at some distance in
+//! some direction saw empty space before it; a right pose never puts the other scan's
+//! surface there. Walls, floors and tables let a wrong overlay of a room overlap well and
+//! lie flat on the other scan; they do not let it keep out of the space the other scanner
+//! looked through.
+//!
+//! Each scan with a known viewpoint gets a panorama: the nearest surface in every direction
+//! seen from the viewpoint, on a grid of (azimuth, elevation) cells. A point of the other
+//! scan, moved by a pose, that falls in a cell nearer than that surface by a margin is in
+//! free space; one within the margin lies on the surface. The measure of a pose is the share
+//! of the other scan's points in free space among those in free space or on the surface.
+
+use crate::se3::Rigid;
+use nalgebra::{Matrix3, SymmetricEigen, Vector3};
+
+/// Points of a scan drawn into its panorama, at most (an even stride subset beyond).
+const MAX_PANORAMA_POINTS: usize = 200_000;
+/// Points of the other scan tested against a panorama, at most (an even stride subset).
+const MAX_PROBES: usize = 2_000;
+/// Cell side of the panorama, in angles between neighbouring points seen from the
+/// viewpoint (their spacing over their median range).
+const CELL_SPACINGS: f64 = 1.5;
+/// A point is in free space only when it is this many point spacings nearer than the
+/// nearest surface around its direction (the surface of a depth-fused fragment is noisy,
+/// its edges ragged).
+const MARGIN_SPACINGS: f64 = 8.0;
+/// Most cells in a panorama (its cells grow beyond).
+const MAX_CELLS: usize = 1 << 22;
+/// A direction with fewer probes in free space or on the surface says nothing.
+const MIN_PROBES_SEEN: usize = 20;
+
+/// A scan's points that are tested against other scans' panoramas, and its own panorama
+/// when its viewpoint is known.
+#[derive(Debug)]
+pub(crate) struct FreeSpace {
+    probes: Vec<[f64; 3]>,
+    panorama: Option<Panorama>,
+}
+
+impl FreeSpace {
+    /// `points` seen from `viewpoint` (same frame, when known).
+    pub(crate) fn new(points: &[[f64; 3]], viewpoint: Option<[f64; 3]>) -> FreeSpace {
+        let stride = points.len().div_ceil(MAX_PROBES).max(1);
+        FreeSpace {
+            probes: points.iter().step_by(stride).copied().collect(),
+            panorama: viewpoint.and_then(|v| Panorama::new(points, v)),
+        }
+    }
+}
+
+/// The nearest surface around every direction seen from a scan's viewpoint.
+#[derive(Debug)]
+struct Panorama {
+    viewpoint: Vector3<f64>,
+    /// Rows: the two axes of azimuth zero and ninety degrees, then the pole, chosen where
+    /// the scan has no points (a depth camera's points lie around its view direction: put
+    /// at the pole, they would crowd into few cells).
+    axes: Matrix3<f64>,
+    cell: f64,
+    columns: usize,
+    rows: usize,
+    /// Nearest range per cell over its 3 x 3 neighbourhood (a point missing from a sparse
+    /// cell must not make the surface behind it look like the nearest one); infinite where
+    /// nothing was seen.
+    nearest: Vec<f32>,
+    margin: f64,
+}
+
+impl Panorama {
+    /// The panorama of `points` seen from `viewpoint` (same frame); `None` when the points
+    /// give no usable spacing (all at the viewpoint, or fewer than 3).
+    fn new(points: &[[f64; 3]], viewpoint: [f64; 3]) -> Option<Panorama> {
+        let stride = points.len().div_ceil(MAX_PANORAMA_POINTS).max(1);
+        let drawn: Vec<[f64; 3]> = points.iter().step_by(stride).copied().collect();
+        if drawn.len() < 3 {
+            return None;
+        }
+        let v = Vector3::from(viewpoint);
+        let mut moment = Matrix3::zeros();
+        let mut ranges = Vec::with_capacity(drawn.len());
+        for p in &drawn {
+            let d = Vector3::from(*p) - v;
+            let r = d.norm();
+            if r > 0.0 {
+                let u = d / r;
+                moment += u * u.transpose();
+                ranges.push(r);
+            }
+        }
+        if ranges.len() < 3 {
+            return None;
+        }
+        let eigen = SymmetricEigen::new(moment);
+        let mut order = [0, 1, 2];
+        order.sort_by(|&a, &b| eigen.eigenvalues[b].total_cmp(&eigen.eigenvalues[a]));
+        let axis = |k: usize| eigen.eigenvectors.column(order[k]).into_owned();
+        let (e1, e2) = (axis(0), axis(1));
+        let axes = Matrix3::from_rows(&[e1.transpose(), e2.transpose(), e1.cross(&e2).transpose()]);
+        ranges.sort_by(f64::total_cmp);
+        let median_range = ranges[ranges.len() / 2];
+        let spacing = crate::cloud::PointCloud::new(drawn.clone()).mean_nearest_neighbor_distance();
+        if !(spacing > 0.0 && median_range > 0.0) {
+            return None;
+        }
+        let full_sky = 2.0 * std::f64::consts::PI * std::f64::consts::PI;
+        let cell = (CELL_SPACINGS * spacing / median_range).max((full_sky / MAX_CELLS as f64).sqrt());
+        let columns = (2.0 * std::f64::consts::PI / cell).ceil() as usize;
+        let rows = (std::f64::consts::PI / cell).ceil() as usize;
+        let mut space = Panorama {
+            viewpoint: v,
+            axes,
+            cell,
+            columns,
+            rows,
+            nearest: vec![f32::INFINITY; columns * rows],
+            margin: MARGIN_SPACINGS * spacing,
+        };
+        let mut seen = vec![f32::INFINITY; columns * rows];
+        for p in &drawn {
+            if let Some((c, r, range)) = space.cell_of(p) {
+                let k = r * columns + c;
+                seen[k] = seen[k].min(range as f32);
+            }
+        }
+        for r in 0..rows {
+            for c in 0..columns {
+                let range = seen[r * columns + c];
+                if range.is_finite() {
+                    for dr in [-1isize, 0, 1] {
+                        let rr = r as isize + dr;
+                        if rr < 0 || rr >= rows as isize {
+                            continue;
+                        }
+                        for dc in [columns - 1, 0, 1] {
+                            let k = rr as usize * columns + (c + dc) % columns;
+                            space.nearest[k] = space.nearest[k].min(range);
+                        }
+                    }
+                }
+            }
+        }
+        Some(space)
+    }
+
+    /// The cell (column, row) and range of `p` (this scan's frame).
+    fn cell_of(&self, p: &[f64; 3]) -> Option<(usize, usize, f64)> {
+        let d = self.axes * (Vector3::from(*p) - self.viewpoint);
+        let range = d.norm();
+        if !(range > 0.0) {
+            return None;
+        }
+        let azimuth = d[1].atan2(d[0]) + std::f64::consts::PI;
+        let elevation = (d[2] / range).clamp(-1.0, 1.0).asin() + std::f64::consts::FRAC_PI_2;
+        let c = ((azimuth / self.cell) as usize).min(self.columns - 1);
+        let r = ((elevation / self.cell) as usize).min(self.rows - 1);
+        Some((c, r, range))
+    }
+
+    /// Of `probes` moved by `pose` into this scan's frame: how many lie in free space and how
+    /// many on the surface (within the margin of the nearest one).
+    fn count(&self, probes: &[[f64; 3]], pose: &Rigid) -> (usize, usize) {
+        let (mut free, mut surface) = (0, 0);
+        for p in probes {
+            let Some((c, r, range)) = self.cell_of(&pose.apply(p)) else {
+                continue;
+            };
+            let nearest = self.nearest[r * self.columns + c] as f64;
+            if range < nearest - self.margin {
+                free += 1;
+            } else if range <= nearest + self.margin {
+                surface += 1;
+            }
+        }
+        (free, surface)
+    }
+}
+
+/// The share of one scan's points that `t_target_source` puts in the free space of the
+/// other, the larger of the two directions (a direction needs the receiving scan's
+/// viewpoint); `None` when neither scan has one.
+pub(crate) fn violation(
+    source: &FreeSpace,
+    target: &FreeSpace,
+    t_target_source: &Rigid,
+) -> Option<f64> {
+    let share = |(free, surface): (usize, usize)| {
+        if free + surface < MIN_PROBES_SEEN {
+            0.0
+        } else {
+            free as f64 / (free + surface) as f64
+        }
+    };
+    let into_target = target
+        .panorama
+        .as_ref()
+        .map(|p| share(p.count(&source.probes, t_target_source)));
+    let into_source = source
+        .panorama
+        .as_ref()
+        .map(|p| share(p.count(&target.probes, &t_target_source.inverse())));
+    match (into_target, into_source) {
+        (None, None) => None,
+        (a, b) => Some(a.unwrap_or(0.0).max(b.unwrap_or(0.0))),
+    }
+}
