@@ -5,6 +5,7 @@ exists at runtime and vice versa, and the keyword arguments of ``Config`` and ``
 are exactly the fields of the Rust ``Config``.
 """
 
+from collections.abc import Sequence
 from os import PathLike
 from typing import Any, Callable, Literal
 
@@ -17,6 +18,7 @@ _Search = Literal["fast", "exact"]
 _Method = Literal["mtpcr", "mfea", "gmfea"]
 _Order = Literal["auto", "given"]
 _Callback = Callable[[int, dict[str, float]], bool | None]
+_Viewpoints = Literal["origin"] | Sequence[ArrayLike | None] | None
 
 __version__: str
 """The package version (the Cargo workspace version)."""
@@ -310,6 +312,7 @@ def register(
     on_generation: _Callback | None = None,
     on_pair_screening: Callable[[int, int], bool | None] | None = None,
     config: Config | None = None,
+    viewpoints: _Viewpoints = None,
     method: _Method = ...,
     order: _Order = ...,
     population_size: int = ...,
@@ -345,6 +348,12 @@ def register(
     the best cost so far); returning False stops the run (``completed=False``), None or True
     continues; an exception in it, or Ctrl-C, stops the run and propagates.
 
+    ``viewpoints``: where each scanner stood in its cloud's frame, for the free-space check (a
+    right pose puts no surface where another scanner saw through; absent without them):
+    ``None`` (unknown), ``"origin"`` (every cloud taken from its own origin: depth-camera
+    frames, 3DMatch fragments) or one entry per cloud, each None or 3 finite numbers. Any other
+    form raises ``ValueError``.
+
     Each cloud holds real numbers (float or int; booleans, complex numbers and strings raise
     ``ValueError``), at least ``MIN_POINTS`` finite points of magnitude at most 1e30, not
     all on one line. A planar cloud is registered with a ``UserWarning``: its rotation about
@@ -360,7 +369,9 @@ def read_points(path: _Path) -> NDArray[np.float64]:
 
 def read_scans(path: _Path) -> list[dict[str, Any]]:
     """Reads every scan of a file (an E57 file may hold several): dicts with ``name``,
-    ``points`` ((N, 3) float64) and ``pose`` (4x4 stored with an E57 scan, else None)."""
+    ``points`` ((N, 3) float64), ``pose`` (4x4 stored with an E57 scan, else None) and
+    ``viewpoint`` (the scanner's position, 3 floats, from a PCD's non-default VIEWPOINT, else
+    None)."""
 
 def write_ply(path: _Path, points: ArrayLike, colors: ArrayLike | None = None) -> None:
     """Writes points (and optional (N, 3) uint8 colours) as a binary PLY file."""

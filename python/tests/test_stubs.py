@@ -95,7 +95,13 @@ def test_config_and_register_keywords_are_the_config_fields(stub):
     assert sorted(set(keywords) ^ fields) == [], "Config.__init__ keywords vs Config fields"
     positional, keywords = stub_params(stub["register"])
     assert positional == [] and stub["register"].args.vararg.arg == "clouds"
-    expected = (fields - {"seed"}) | {"seed", "on_generation", "on_pair_screening", "config"}
+    expected = (fields - {"seed"}) | {
+        "seed",
+        "on_generation",
+        "on_pair_screening",
+        "config",
+        "viewpoints",
+    }
     assert sorted(set(keywords) ^ expected) == [], "register keywords vs Config fields"
     assert len(keywords) == len(set(keywords))
 

@@ -85,6 +85,10 @@ enum Command {
         /// Seed of the run [default: the config file's, else drawn and reported].
         #[arg(long)]
         seed: Option<u64>,
+        /// Where each scanner stood, for the free-space check (a right pose puts no scan's
+        /// surface where another scanner saw through).
+        #[arg(long, value_enum, default_value_t = Viewpoints::File, value_name = "WHERE")]
+        viewpoint: Viewpoints,
         #[command(flatten)]
         run: RunArgs,
     },
@@ -137,6 +141,31 @@ enum Command {
         #[arg(long)]
         paper: bool,
     },
+}
+
+/// Where the scanners stood (`register --viewpoint`): each cloud's viewpoint, the
+/// scanner's position in the cloud's own frame, lets the engine check free space.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum Viewpoints {
+    /// Every scan was taken from its own file's origin (depth-camera frames, 3DMatch
+    /// fragments).
+    Origin,
+    /// Only what the files say (a PCD header's VIEWPOINT other than the default).
+    File,
+    /// No viewpoint, even where a file gives one (the free-space check is off).
+    #[value(name = "none")]
+    Ignore,
+}
+
+impl Viewpoints {
+    /// The cloud with its viewpoint set as chosen.
+    fn apply(self, cloud: PointCloud) -> PointCloud {
+        match self {
+            Viewpoints::Origin => cloud.with_viewpoint([0.0; 3]),
+            Viewpoints::File => cloud,
+            Viewpoints::Ignore => PointCloud::new(cloud.into_points()),
+        }
+    }
 }
 
 fn demo(seed: Option<u64>, points: usize, run: &RunArgs) -> CliResult<bool> {
@@ -203,8 +232,13 @@ fn planar_warning(number: usize, label: &str) -> String {
 
 /// Reads every scan of every file (an E57 file may hold several), validated; returns the
 /// clouds and a label per cloud (the file, and the scan's name when a file holds several).
-/// A planar cloud is accepted with a warning on stderr (even with `--quiet`).
-fn read_clouds(paths: &[PathBuf], quiet: bool) -> CliResult<(Vec<PointCloud>, Vec<String>)> {
+/// A planar cloud is accepted with a warning on stderr (even with `--quiet`). Each cloud's
+/// viewpoint is set as `viewpoints` says.
+fn read_clouds(
+    paths: &[PathBuf],
+    viewpoints: Viewpoints,
+    quiet: bool,
+) -> CliResult<(Vec<PointCloud>, Vec<String>)> {
     let mut clouds = Vec::with_capacity(paths.len());
     let mut labels = Vec::with_capacity(paths.len());
     for p in paths {
@@ -223,7 +257,7 @@ fn read_clouds(paths: &[PathBuf], quiet: bool) -> CliResult<(Vec<PointCloud>, Ve
             if !quiet {
                 eprintln!("read {label}: {} points", scan.cloud.len());
             }
-            clouds.push(scan.cloud);
+            clouds.push(viewpoints.apply(scan.cloud));
             labels.push(label);
         }
     }
@@ -248,6 +282,7 @@ fn register_files(
     output: Option<&Path>,
     force: bool,
     seed: Option<u64>,
+    viewpoints: Viewpoints,
     run: &RunArgs,
 ) -> CliResult<bool> {
     let mut config = settings::resolve(run, seed)?;
@@ -265,7 +300,7 @@ fn register_files(
     let inputs = &files[..];
     // The folder is checked before the (possibly long) reading.
     let dir = output::prepare_output(output, inputs, force)?;
-    let (clouds, labels) = match read_clouds(inputs, run.quiet) {
+    let (clouds, labels) = match read_clouds(inputs, viewpoints, run.quiet) {
         Ok(c) => c,
         Err(e) => {
             dir.discard_if_unused();
@@ -750,14 +785,17 @@ fn main() -> ExitCode {
             output,
             force,
             seed,
+            viewpoint,
             run,
-        } => register_files(clouds, output.as_deref(), *force, *seed, run).map(|confident| {
-            if confident {
-                ExitCode::SUCCESS
-            } else {
-                ExitCode::from(NOT_CONFIDENT)
-            }
-        }),
+        } => register_files(clouds, output.as_deref(), *force, *seed, *viewpoint, run).map(
+            |confident| {
+                if confident {
+                    ExitCode::SUCCESS
+                } else {
+                    ExitCode::from(NOT_CONFIDENT)
+                }
+            },
+        ),
         Command::Eval {
             problems,
             runs,

@@ -211,7 +211,7 @@ pub struct RunRecord<'a> {
     pub inputs: &'a [PathBuf],
     /// One label per cloud (its file, and the scan's name when a file holds several).
     pub labels: &'a [String],
-    /// The clouds as read.
+    /// The clouds as read, with the viewpoints `--viewpoint` gave them.
     pub clouds: &'a [PointCloud],
     /// The settings of the run (its seed is filled in from the result).
     pub config: &'a Config,
@@ -284,6 +284,7 @@ pub fn result_json(rec: &RunRecord<'_>) -> serde_json::Value {
         "inputs": rec.inputs.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
         "clouds": rec.labels,
         "points": rec.clouds.iter().map(PointCloud::len).collect::<Vec<_>>(),
+        "viewpoints": rec.clouds.iter().map(PointCloud::viewpoint).collect::<Vec<_>>(),
         "convention": CONVENTION,
         "completed": r.completed,
         "confident": r.verdict.confident,

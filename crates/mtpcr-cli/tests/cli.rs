@@ -777,6 +777,88 @@ fn bad_input_files_are_named_in_the_error() {
     );
 }
 
+/// `points` as an ascii PCD file (f64, printed to round trip) with the header line
+/// `VIEWPOINT {viewpoint}`.
+fn write_pcd_with_viewpoint(path: &Path, points: &[[f64; 3]], viewpoint: &str) {
+    let n = points.len();
+    let mut text = format!(
+        "VERSION 0.7\nFIELDS x y z\nSIZE 8 8 8\nTYPE F F F\nCOUNT 1 1 1\nWIDTH {n}\nHEIGHT 1\n\
+         VIEWPOINT {viewpoint}\nPOINTS {n}\nDATA ascii\n"
+    );
+    for p in points {
+        text.push_str(&format!("{} {} {}\n", p[0], p[1], p[2]));
+    }
+    std::fs::write(path, text).unwrap();
+}
+
+/// `--viewpoint` sets each cloud's viewpoint (result.json records them): `file`, the
+/// default, takes a PCD header's VIEWPOINT (PLY has none); `origin` puts every scanner at
+/// its file's origin; `none` drops what a file says.
+#[test]
+fn register_sets_the_viewpoints_as_the_option_says() {
+    let dir = tempfile::tempdir().unwrap();
+    let [one, two, three] = write_views(dir.path());
+    let pcd = dir.path().join("view2.pcd");
+    write_pcd_with_viewpoint(&pcd, read_ply(&two).unwrap().points(), "0.5 -1 2 1 0 0 0");
+    let inputs = [one, pcd, three];
+    let from_file = serde_json::json!([null, [0.5, -1.0, 2.0], null]);
+    let cases = [
+        (None, from_file.clone()),
+        (Some("file"), from_file),
+        (
+            Some("origin"),
+            serde_json::json!([[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]),
+        ),
+        (Some("none"), serde_json::json!([null, null, null])),
+    ];
+    for (k, (flag, want)) in cases.into_iter().enumerate() {
+        let out = dir.path().join(format!("out{k}"));
+        let mut cmd = mtpcr();
+        cmd.arg("register")
+            .args(args_of(&inputs))
+            .arg("--output")
+            .arg(&out)
+            .args(["--seed", "5"])
+            .args(FAST);
+        if let Some(flag) = flag {
+            cmd.args(["--viewpoint", flag]);
+        }
+        let assert = cmd.assert().code(REGISTERED);
+        let stderr = String::from_utf8_lossy(&assert.get_output().stderr).into_owned();
+        assert!(!stderr.contains("panicked"), "{flag:?}: {stderr}");
+        let json = read_json(&out.join("result.json"));
+        assert_eq!(json["viewpoints"], want, "--viewpoint {flag:?}");
+        assert_eq!(json["points"], serde_json::json!([3000, 3000, 3000]));
+    }
+}
+
+#[test]
+fn a_bad_viewpoint_value_is_a_usage_error_listing_the_choices() {
+    fails_with(
+        mtpcr().args(["register", "a.ply", "b.ply", "--viewpoint", "sideways"]),
+        2,
+        &[
+            "invalid value 'sideways'",
+            "--viewpoint",
+            "origin",
+            "file",
+            "none",
+        ],
+    );
+    let help = mtpcr()
+        .args(["register", "--help"])
+        .assert()
+        .success()
+        .get_output()
+        .stdout
+        .clone();
+    let help = String::from_utf8_lossy(&help);
+    assert!(
+        help.contains("--viewpoint <WHERE>") && help.contains("free-space check"),
+        "{help}"
+    );
+}
+
 #[test]
 fn usage_errors_exit_with_2() {
     fails_with(

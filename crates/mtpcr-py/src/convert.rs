@@ -141,6 +141,81 @@ pub(crate) fn cloud_from_py(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Poin
     Ok(cloud)
 }
 
+/// What the `viewpoints` argument of `register` may be, for error messages.
+const VIEWPOINTS: &str = "None, \"origin\" or a sequence with one entry per cloud, each None \
+    or 3 finite numbers";
+
+/// The `viewpoints` argument of `register` for `count` clouds: each cloud's viewpoint (the
+/// scanner's position in the cloud's frame) or `None`. `None` gives none; `"origin"` puts
+/// every scanner at its cloud's origin; a sequence gives one entry per cloud, each `None` or
+/// anything numpy views as 3 finite real numbers. Anything else is a `ValueError` naming the
+/// problem (`viewpoints[1] must be 3 finite numbers, got shape (2,)`).
+pub(crate) fn viewpoints_from_py(
+    obj: Option<&Bound<'_, PyAny>>,
+    count: usize,
+) -> PyResult<Vec<Option<[f64; 3]>>> {
+    let Some(obj) = obj.filter(|o| !o.is_none()) else {
+        return Ok(vec![None; count]);
+    };
+    if obj.is_instance_of::<PyString>() {
+        let text: String = obj.extract()?;
+        return match text.as_str() {
+            "origin" => Ok(vec![Some([0.0; 3]); count]),
+            _ => Err(PyValueError::new_err(format!(
+                "viewpoints must be {VIEWPOINTS}; got the string {text:?} (the only string \
+                 accepted is \"origin\")"
+            ))),
+        };
+    }
+    let not_a_sequence = || {
+        PyValueError::new_err(format!(
+            "viewpoints must be {VIEWPOINTS}; got {}",
+            type_name(obj)
+        ))
+    };
+    let len = obj.len().map_err(|_| not_a_sequence())?;
+    if len != count {
+        return Err(PyValueError::new_err(format!(
+            "viewpoints must have one entry per cloud: {count} clouds, {len} viewpoints"
+        )));
+    }
+    (0..count)
+        .map(|i| {
+            let entry = obj.get_item(i).map_err(|_| not_a_sequence())?;
+            if entry.is_none() {
+                return Ok(None);
+            }
+            let name = format!("viewpoints[{i}]");
+            let what = "3 finite numbers";
+            let array = as_numpy(&entry, None, &name, what)?;
+            let kind: String = array.getattr("dtype")?.getattr("kind")?.extract()?;
+            if !matches!(kind.as_str(), "f" | "i" | "u") {
+                let dtype = array.getattr("dtype")?.str()?.to_string();
+                return Err(PyValueError::new_err(format!(
+                    "{name} must be {what}, got dtype {dtype}"
+                )));
+            }
+            let array =
+                as_numpy(&array, Some("float64"), &name, what)?.cast_into::<PyArrayDyn<f64>>()?;
+            if array.shape() != [3] {
+                return Err(PyValueError::new_err(format!(
+                    "{name} must be {what}, got shape {}",
+                    shape_text(array.shape())
+                )));
+            }
+            let readonly = array.try_readonly().map_err(|e| borrowed(&name, e))?;
+            let v = readonly.as_array();
+            let point = [v[0], v[1], v[2]];
+            if point.iter().any(|x| !x.is_finite()) {
+                return Err(PyValueError::new_err(format!(
+                    "{name} must be {what}, got {point:?}"
+                )));
+            }
+            Ok(Some(point))
+        })
+        .collect()
+}
+
 /// Per-point RGB colours: an `(expected, 3)` array of integers in 0..=255.
 pub(crate) fn colors_from_py(
     obj: &Bound<'_, PyAny>,

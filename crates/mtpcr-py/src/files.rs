@@ -40,8 +40,11 @@ pub(crate) fn read_points(py: Python<'_>, path: PathBuf) -> PyResult<Bound<'_, P
 
 /// Reads every scan of a point-cloud file (the formats of :func:`read_points`; an E57 file
 /// may hold several scans): a list of dicts with ``name`` (str), ``points`` (``(N, 3)``
-/// float64) and ``pose`` (the 4x4 scan-to-file-frame pose stored with an E57 scan, else
-/// ``None``), ready for ``register(*[s["points"] for s in scans])``.
+/// float64), ``pose`` (the 4x4 scan-to-file-frame pose stored with an E57 scan, else
+/// ``None``) and ``viewpoint`` (the scanner's position in the scan's frame, 3 floats, when
+/// the file gives one: a PCD header's VIEWPOINT other than the default; else ``None``),
+/// ready for ``register(*[s["points"] for s in scans], viewpoints=[s["viewpoint"] for s in
+/// scans])``.
 #[pyfunction]
 pub(crate) fn read_scans(py: Python<'_>, path: PathBuf) -> PyResult<Vec<Bound<'_, PyDict>>> {
     let scans = py.detach(|| io::read_scans(&path)).map_err(to_py)?;
@@ -55,6 +58,7 @@ pub(crate) fn read_scans(py: Python<'_>, path: PathBuf) -> PyResult<Vec<Bound<'_
                 Some(pose) => d.set_item("pose", transform_to_py(py, pose))?,
                 None => d.set_item("pose", py.None())?,
             }
+            d.set_item("viewpoint", scan.cloud.viewpoint())?;
             Ok(d)
         })
         .collect()

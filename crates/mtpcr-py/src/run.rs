@@ -3,6 +3,7 @@
 use crate::config::{apply_settings, base_config, config_to_dict, kwargs_pairs};
 use crate::convert::{
     cloud_from_py, points_from_py, points_to_py, transform_to_py, transforms_to_py,
+    viewpoints_from_py,
 };
 use crate::errors::to_py;
 use mtpcr_core::{Config, Interrupt, Progress, Registration, Stage};
@@ -110,6 +111,13 @@ fn callable(f: Option<&Bound<'_, PyAny>>, name: &str) -> PyResult<Option<Py<PyAn
 /// continues. An exception raised by the callback stops the run and propagates, and so does
 /// Ctrl-C (``KeyboardInterrupt``, noticed after the current generation).
 ///
+/// ``viewpoints`` says where each scanner stood, in its cloud's own frame, so that the
+/// registration can check free space (a right pose puts no cloud's surface where another
+/// scanner saw through); without them that check is absent. ``None`` (the default): unknown;
+/// ``"origin"``: every cloud was taken from its own origin (depth-camera frames, 3DMatch
+/// fragments); or a sequence with one entry per cloud, each ``None`` or 3 finite numbers
+/// (e.g. ``[s["viewpoint"] for s in read_scans(path)]``). Anything else raises ``ValueError``.
+///
 /// ``on_pair_screening(screened, total)`` is called as four or more clouds given in no
 /// known order are screened pair by pair for pose hypotheses (after each batch of pairs;
 /// the slow part of a whole room); returning ``False`` stops the screening (the pairs not
@@ -118,7 +126,8 @@ fn callable(f: Option<&Bound<'_, PyAny>>, name: &str) -> PyResult<Option<Py<PyAn
 /// The GIL is released while the engine runs. Bad clouds or settings raise ``ValueError``
 /// naming the argument or setting; an unknown keyword raises ``TypeError``.
 #[pyfunction]
-#[pyo3(signature = (*clouds, seed=None, on_generation=None, on_pair_screening=None, config=None, **settings))]
+#[pyo3(signature = (*clouds, seed=None, on_generation=None, on_pair_screening=None, config=None, viewpoints=None, **settings))]
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn register(
     py: Python<'_>,
     clouds: &Bound<'_, PyTuple>,
@@ -126,6 +135,7 @@ pub(crate) fn register(
     on_generation: Option<&Bound<'_, PyAny>>,
     on_pair_screening: Option<&Bound<'_, PyAny>>,
     config: Option<&Bound<'_, PyAny>>,
+    viewpoints: Option<&Bound<'_, PyAny>>,
     settings: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<PyRegistration> {
     let base = base_config(config)?;
@@ -147,10 +157,18 @@ pub(crate) fn register(
             clouds.len()
         )));
     }
+    let viewpoints = viewpoints_from_py(viewpoints, clouds.len())?;
     let clouds: Vec<_> = clouds
         .iter()
+        .zip(viewpoints)
         .enumerate()
-        .map(|(i, c)| cloud_from_py(&c, &format!("cloud{}", i + 1)))
+        .map(|(i, (c, viewpoint))| {
+            let cloud = cloud_from_py(&c, &format!("cloud{}", i + 1))?;
+            Ok(match viewpoint {
+                Some(v) => cloud.with_viewpoint(v),
+                None => cloud,
+            })
+        })
         .collect::<PyResult<_>>()?;
     let names = mtpcr_core::ViewGraph::for_views(clouds.len())
         .map_err(to_py)?

@@ -46,7 +46,9 @@ pub struct Scan {
 pub enum Format {
     /// Stanford PLY, ASCII or binary (`.ply`); the `vertex` element's `x y z`.
     Ply,
-    /// PCL's PCD, ascii, binary or binary_compressed (`.pcd`); non-finite points are dropped.
+    /// PCL's PCD, ascii, binary or binary_compressed (`.pcd`); non-finite points are dropped;
+    /// a VIEWPOINT other than the default `0 0 0 1 0 0 0` gives the cloud its viewpoint
+    /// ([`PointCloud::with_viewpoint`]: the VIEWPOINT's position `tx ty tz`).
     Pcd,
     /// ASTM E57 (`.e57`); every scan with its pose; invalid and non-finite points are dropped.
     E57,
@@ -194,6 +196,10 @@ fn one_scan(path: &Path, cloud: PointCloud) -> Vec<Scan> {
 /// Non-finite points are dropped from PCD and E57 files (missing returns of organised
 /// sensors; for E57 also points flagged invalid) and kept from the others (registration
 /// validates the clouds and reports them).
+///
+/// A cloud's viewpoint (the scanner's position, [`PointCloud::viewpoint`]) is set only
+/// from what a file says: a PCD header's VIEWPOINT when it is not the default
+/// `0 0 0 1 0 0 0`. Otherwise it is unknown (`None`).
 pub fn read_scans(path: impl AsRef<Path>) -> Result<Vec<Scan>> {
     let path = path.as_ref();
     let mut file = File::open(path).map_err(|e| Error::io(path, e))?;
@@ -406,6 +412,25 @@ mod tests {
             matches!(e, Error::Io { .. }) && e.to_string().contains("nowhere.e57"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn a_pcd_viewpoint_reaches_the_scans_and_points_read() {
+        let text = "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 1\n\
+            HEIGHT 1\nVIEWPOINT 0.5 -1 2 1 0 0 0\nPOINTS 1\nDATA ascii\n1 2 3\n";
+        let path = tmp("viewpoint.pcd");
+        std::fs::write(&path, text).unwrap();
+        let scans = read_scans(&path).unwrap();
+        assert_eq!(scans[0].cloud.viewpoint(), Some([0.5, -1.0, 2.0]));
+        assert_eq!(
+            read_points(&path).unwrap().viewpoint(),
+            Some([0.5, -1.0, 2.0])
+        );
+        let scans = read_scans_bytes("viewpoint.pcd", text.as_bytes()).unwrap();
+        assert_eq!(scans[0].cloud.viewpoint(), Some([0.5, -1.0, 2.0]));
+        // Formats that store no viewpoint leave it unknown.
+        let scans = read_scans_bytes("a.xyz", b"1 2 3\n4 5 6\n").unwrap();
+        assert_eq!(scans[0].cloud.viewpoint(), None);
     }
 
     #[test]

@@ -5,10 +5,15 @@
 //! coordinate are dropped: organised sensors store NaN points for missing returns. The header
 //! is checked against the file's size before any data is read, so a header count cannot make
 //! the reader allocate more than the file can hold.
+//!
+//! The header's `VIEWPOINT tx ty tz qw qx qy qz` (the sensor's pose in the cloud's frame)
+//! gives the cloud its viewpoint ([`PointCloud::with_viewpoint`]): its position `tx ty tz`.
+//! The default `0 0 0 1 0 0 0` means "not given" (PCL writes it for every file, maps in a
+//! world frame included) and leaves the viewpoint unknown.
 
 use crate::cloud::PointCloud;
 use crate::error::{Error, Result};
-use pcd_rs::{DataKind, DynReader, Field, PcdMeta};
+use pcd_rs::{DataKind, DynReader, Field, PcdMeta, ViewPoint};
 use std::io::Cursor;
 use std::path::Path;
 
@@ -37,11 +42,34 @@ fn describe(e: &pcd_rs::Error) -> String {
     e.to_string().lines().collect::<Vec<_>>().join(" ")
 }
 
+/// The scanner's position from a header's VIEWPOINT: its translation, or `None` for the
+/// default `0 0 0 1 0 0 0` ("not given"). A non-finite value is an error naming the file.
+fn viewpoint(path: &Path, vp: &ViewPoint) -> Result<Option<[f64; 3]>> {
+    let values = [vp.tx, vp.ty, vp.tz, vp.qw, vp.qx, vp.qy, vp.qz];
+    if values.iter().any(|v| !v.is_finite()) {
+        return Err(Error::malformed(
+            path,
+            format!(
+                "the PCD header's VIEWPOINT must hold 7 finite numbers (tx ty tz qw qx qy qz), \
+                 got {}",
+                values.map(|v| v.to_string()).join(" ")
+            ),
+        ));
+    }
+    Ok((*vp != ViewPoint::default()).then_some([vp.tx, vp.ty, vp.tz]))
+}
+
 /// Reads a PCD file held in `bytes`; `path` names it in errors.
+///
+/// The cloud's viewpoint is the position (`tx ty tz`) of the header's `VIEWPOINT tx ty tz qw
+/// qx qy qz` when that is not the default `0 0 0 1 0 0 0`; with the default (which PCL
+/// writes for every file) or no VIEWPOINT line it is unknown (`None`). A VIEWPOINT with a
+/// non-finite value is an error.
 pub(crate) fn read_pcd_bytes(path: &Path, bytes: &[u8]) -> Result<PointCloud> {
     let mut cursor = Cursor::new(bytes);
     let meta = PcdMeta::from_reader(&mut cursor)
         .map_err(|e| Error::malformed(path, format!("bad PCD header: {}", describe(&e))))?;
+    let viewpoint = viewpoint(path, &meta.viewpoint)?;
     let data_start = usize::try_from(cursor.position()).unwrap_or(usize::MAX);
     let header_lines = bytes[..data_start.min(bytes.len())]
         .iter()
@@ -196,7 +224,11 @@ pub(crate) fn read_pcd_bytes(path: &Path, bytes: &[u8]) -> Result<PointCloud> {
             points.push([x, y, z]);
         }
     }
-    Ok(PointCloud::new(points))
+    let cloud = PointCloud::new(points);
+    Ok(match viewpoint {
+        Some(v) => cloud.with_viewpoint(v),
+        None => cloud,
+    })
 }
 
 #[cfg(test)]
@@ -293,6 +325,85 @@ pub(crate) mod tests {
             POINTS 2\nDATA ascii\r\n7 0.1 0.2 0.3\r\n7 -1e300 2 3\r\n";
         let c = read_pcd_bytes(Path::new("pad.pcd"), text.as_bytes()).unwrap();
         assert_eq!(c.points(), &[[0.1, 0.2, 0.3], [-1e300, 2.0, 3.0]]);
+    }
+
+    /// A small ascii PCD file with the given VIEWPOINT line (none when `None`).
+    fn with_viewpoint_line(viewpoint: Option<&str>) -> String {
+        let line = viewpoint.map_or(String::new(), |v| format!("VIEWPOINT {v}\n"));
+        format!(
+            "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 2\n\
+             HEIGHT 1\n{line}POINTS 2\nDATA ascii\n1 2 3\n4 5 6\n"
+        )
+    }
+
+    #[test]
+    fn a_non_default_viewpoint_gives_the_clouds_viewpoint() {
+        let cases: [(Option<&str>, Option<[f64; 3]>); 6] = [
+            (Some("1.5 -2 0.25 1 0 0 0"), Some([1.5, -2.0, 0.25])),
+            // A rotated sensor at the origin is a given viewpoint too.
+            (Some("0 0 0 0.7071068 0 0.7071068 0"), Some([0.0, 0.0, 0.0])),
+            (Some("3 4 5 0.5 0.5 0.5 0.5"), Some([3.0, 4.0, 5.0])),
+            // The default (PCL writes it for every file) and no line at all: not given.
+            (Some("0 0 0 1 0 0 0"), None),
+            (Some("0.0 0.0 0.0 1.0 0.0 0.0 0.0"), None),
+            (None, None),
+        ];
+        for (line, want) in cases {
+            let text = with_viewpoint_line(line);
+            let c = read_pcd_bytes(Path::new("vp.pcd"), text.as_bytes()).unwrap();
+            assert_eq!(c.viewpoint(), want, "VIEWPOINT {line:?}");
+            assert_eq!(c.points(), &[[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]);
+        }
+        // Written by pcd-rs in binary: the viewpoint survives the round trip.
+        let path = tmp("viewpoint.pcd");
+        let mut writer: DynWriter<_> = WriterInit {
+            width: 1,
+            height: 1,
+            viewpoint: ViewPoint {
+                tx: -0.5,
+                ty: 7.0,
+                tz: 1e3,
+                ..Default::default()
+            },
+            data_kind: DataKind::Binary,
+            schema: Some(Schema::from_iter([
+                ("x", ValueKind::F32, 1),
+                ("y", ValueKind::F32, 1),
+                ("z", ValueKind::F32, 1),
+            ])),
+            version: None,
+        }
+        .create(&path)
+        .unwrap();
+        let record = DynRecord(vec![
+            Field::F32(vec![1.0]),
+            Field::F32(vec![2.0]),
+            Field::F32(vec![3.0]),
+        ]);
+        writer.push(&record).unwrap();
+        writer.finish().unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        let c = read_pcd_bytes(&path, &bytes).unwrap();
+        assert_eq!(c.viewpoint(), Some([-0.5, 7.0, 1e3]));
+        // The files written with the default VIEWPOINT leave it unknown.
+        let path = tmp("default-viewpoint.pcd");
+        write_pcd(&path, DataKind::Binary, &sample());
+        let c = read_pcd_bytes(&path, &std::fs::read(&path).unwrap()).unwrap();
+        assert_eq!(c.viewpoint(), None);
+    }
+
+    #[test]
+    fn a_non_finite_viewpoint_is_an_error_naming_it() {
+        for line in ["nan 0 0 1 0 0 0", "0 inf 0 1 0 0 0", "0 0 0 NaN 0 0 0"] {
+            let text = with_viewpoint_line(Some(line));
+            let e = read_pcd_bytes(Path::new("badvp.pcd"), text.as_bytes()).unwrap_err();
+            let msg = e.to_string();
+            assert!(matches!(e, Error::MalformedFile { .. }), "{line}: {msg}");
+            assert!(
+                msg.contains("badvp.pcd") && msg.contains("VIEWPOINT must hold 7 finite"),
+                "{line}: {msg}"
+            );
+        }
     }
 
     /// Malformed PCD files, each with a piece of the message it must give. Shared with the
