@@ -104,7 +104,8 @@ impl Panorama {
             return None;
         }
         let full_sky = 2.0 * std::f64::consts::PI * std::f64::consts::PI;
-        let cell = (CELL_SPACINGS * spacing / median_range).max((full_sky / MAX_CELLS as f64).sqrt());
+        let cell =
+            (CELL_SPACINGS * spacing / median_range).max((full_sky / MAX_CELLS as f64).sqrt());
         let columns = (2.0 * std::f64::consts::PI / cell).ceil() as usize;
         let rows = (std::f64::consts::PI / cell).ceil() as usize;
         let mut space = Panorama {
@@ -267,7 +268,10 @@ mod tests {
         assert!(near > 0.3, "shifted pose: {near}");
         // Without viewpoints the check is absent, with one it works one way.
         let blind = FreeSpace::new(&source_points, None);
-        assert_eq!(violation(&blind, &FreeSpace::new(&target_points, None), &truth), None);
+        assert_eq!(
+            violation(&blind, &FreeSpace::new(&target_points, None), &truth),
+            None
+        );
         assert!(violation(&blind, &target, &wrong).unwrap() > 0.3);
     }
 }

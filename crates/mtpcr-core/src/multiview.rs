@@ -26,7 +26,7 @@ use crate::refine::refine_poses;
 use crate::result::{EdgeEstimate, Registration, Unplaced};
 use crate::se3::{invert_rigid, rotation_error_deg, translation_error, Rigid, Transform};
 use crate::verdict::{
-    check_edge, doubts, judge, EdgeCheck, MAX_FREE_SPACE, MAX_RESIDUAL, MIN_OVERLAP, MIN_SUPPORT, RIVAL_RATIO,
+    doubts, judge, EdgeCheck, MAX_FREE_SPACE, MAX_RESIDUAL, MIN_OVERLAP, MIN_SUPPORT, RIVAL_RATIO,
 };
 use rayon::prelude::*;
 
@@ -100,7 +100,7 @@ pub(crate) fn register_unordered(
                 chosen[p]
                     .and_then(|h| pairs[p].poses.get(h))
                     .is_none_or(|(pose, _)| {
-                        let c = check_edge(prepared, pairs[p].edge, &Rigid::from_matrix(pose));
+                        let c = prepared.check_edge(pairs[p].edge, &Rigid::from_matrix(pose));
                         !(c.overlap >= MIN_OVERLAP
                             && c.residual <= MAX_RESIDUAL
                             && c.free_space.is_none_or(|f| f <= MAX_FREE_SPACE))
@@ -264,11 +264,7 @@ fn measure(
         .filter_map(|&p| {
             let edge = pairs[p].edge;
             let (ws, wt) = (placed[edge.source]?, placed[edge.target]?);
-            let check = check_edge(
-                prepared,
-                edge,
-                &Rigid::from_matrix(&(invert_rigid(&wt) * ws)),
-            );
+            let check = prepared.check_edge(edge, &Rigid::from_matrix(&(invert_rigid(&wt) * ws)));
             Some((p, check))
         })
         .unzip()

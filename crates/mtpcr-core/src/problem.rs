@@ -5,15 +5,15 @@
 use crate::cloud::{PointCloud, Sampling};
 use crate::config::{Config, Order};
 use crate::error::{Error, Result};
-use crate::freespace::{violation, FreeSpace};
 use crate::features::{describe, FeatureConfig, Features, PairMatches};
-use crate::graph::ViewGraph;
+use crate::freespace::{violation, FreeSpace};
+use crate::graph::{Edge, ViewGraph};
 use crate::interrupt::Interrupt;
 use crate::loss::{CappedDistanceLoss, InlierLoss, Loss};
 use crate::refine::RefineCloud;
 use crate::se3::{translation, Rigid, Transform};
 use crate::search::{IndexedCloud, SearchMethod};
-use crate::verdict::MAX_FREE_SPACE;
+use crate::verdict::{check_edge, EdgeCheck, MAX_FREE_SPACE};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use std::time::Instant;
@@ -358,8 +358,7 @@ impl PreparedProblem {
     }
 
     /// The descriptor matches of a pair and its candidate poses from them (centred frames,
-    /// at most `count`, best first, those keeping out of free space); `None` without
-    /// features.
+    /// at most `count`, best first); `None` without features.
     pub(crate) fn pair_hypotheses(
         &self,
         source: usize,
@@ -375,22 +374,12 @@ impl PreparedProblem {
         };
         let (s, t) = (&features[source], &features[target]);
         let matches = PairMatches::new(s, t, &config)?;
-        let poses: Vec<Rigid> = matches
+        let poses = matches
             .candidates(s, t)
             .iter()
             .map(|c| Rigid::from_matrix(&c.t_target_source))
             .collect();
-        // With viewpoints, a pose that puts a surface where a scanner saw through is no
-        // hypothesis (kept only when every one does, for the verdict to say so).
-        let clear: Vec<Rigid> = poses
-            .iter()
-            .filter(|r| {
-                self.free_space_violation(source, target, r)
-                    .is_none_or(|v| v <= MAX_FREE_SPACE)
-            })
-            .copied()
-            .collect();
-        Ok(Some((matches, if clear.is_empty() { poses } else { clear })))
+        Ok(Some((matches, poses)))
     }
 
     /// The share of one scan's points that `t` (cloud `s` -> cloud `d`, centred frames) puts
@@ -401,6 +390,33 @@ impl PreparedProblem {
             return None;
         }
         violation(&self.free_space[s], &self.free_space[d], t)
+    }
+
+    /// The verdict's measures of `edge` at `t` (centred frames), free space included.
+    pub(crate) fn check_edge(&self, edge: Edge, t: &Rigid) -> EdgeCheck {
+        EdgeCheck {
+            free_space: self.free_space_violation(edge.source, edge.target, t),
+            ..check_edge(&self.full, edge, t, self.eps)
+        }
+    }
+
+    /// The `poses` (cloud `s` -> cloud `d`, centred frames) that put no surface where a
+    /// scanner saw through ([`MAX_FREE_SPACE`]); all of them when every one does (for the
+    /// verdict to say so) or without viewpoints.
+    pub(crate) fn clear_of_free_space(&self, s: usize, d: usize, poses: Vec<Rigid>) -> Vec<Rigid> {
+        let clear: Vec<Rigid> = poses
+            .iter()
+            .filter(|r| {
+                self.free_space_violation(s, d, r)
+                    .is_none_or(|v| v <= MAX_FREE_SPACE)
+            })
+            .copied()
+            .collect();
+        if clear.is_empty() {
+            poses
+        } else {
+            clear
+        }
     }
 
     /// `t` (cloud `s` -> cloud `d`, original frames) in the centred frames.

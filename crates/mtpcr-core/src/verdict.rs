@@ -10,7 +10,7 @@
 //!   (residual ~ 0.4, uniform within eps).
 
 use crate::graph::Edge;
-use crate::problem::PreparedProblem;
+use crate::refine::RefineCloud;
 use crate::se3::Rigid;
 use kiddo::SquaredEuclidean;
 
@@ -98,11 +98,11 @@ pub struct Verdict {
 
 /// Measures `edge` at its transform `t_target_source` (centred frames).
 pub(crate) fn check_edge(
-    prepared: &PreparedProblem,
+    clouds: &[RefineCloud],
     edge: Edge,
     t_target_source: &Rigid,
+    eps: f64,
 ) -> EdgeCheck {
-    let (clouds, eps) = (prepared.refine_clouds(), prepared.eps());
     let one_way = |s: usize, t: usize, to_t: Rigid| -> (usize, usize, Vec<f64>) {
         let (src, dst) = (&clouds[s], &clouds[t]);
         let mut residuals = Vec::new();
@@ -137,7 +137,7 @@ pub(crate) fn check_edge(
             / eps,
         support: None,
         rival_support: None,
-        free_space: prepared.free_space_violation(edge.source, edge.target, t_target_source),
+        free_space: None,
     }
 }
 

@@ -409,9 +409,8 @@ impl FragmentCache {
             Entry::Occupied(known) => known.into_mut(),
             // 3DMatch fragments lie in their reference camera's frame (every point
             // 0.5-3.5 m in front of it): the viewpoint is the origin.
-            Entry::Vacant(slot) => slot.insert(
-                read_points(benchmark.fragment_path(scene, k))?.with_viewpoint([0.0; 3]),
-            ),
+            Entry::Vacant(slot) => slot
+                .insert(read_points(benchmark.fragment_path(scene, k))?.with_viewpoint([0.0; 3])),
         })
     }
 }

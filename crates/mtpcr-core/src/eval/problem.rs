@@ -154,12 +154,12 @@ impl Problem {
         let viewpoints = match file.viewpoints {
             None => vec![None; n],
             Some(ViewpointsField::Named(w)) if w == "origin" => vec![Some([0.0; 3]); n],
-            Some(ViewpointsField::Named(w)) => {
-                return Err(Error::malformed(
-                    path,
-                    format!("viewpoints must be \"origin\" or one [x, y, z] or null per scan, got \"{w}\""),
-                ))
-            }
+            Some(ViewpointsField::Named(w)) => return Err(Error::malformed(
+                path,
+                format!(
+                    "viewpoints must be \"origin\" or one [x, y, z] or null per scan, got \"{w}\""
+                ),
+            )),
             Some(ViewpointsField::Each(v)) => {
                 if v.len() != n || v.iter().flatten().flatten().any(|x| !x.is_finite()) {
                     return Err(Error::malformed(
@@ -258,6 +258,24 @@ mod tests {
         )
         .unwrap_err();
         assert!(e.to_string().contains("at least 2 scans"), "{e}");
+    }
+
+    #[test]
+    fn viewpoints_are_read_and_checked() {
+        let pose = rows(&decode(&[0.0; 6]));
+        let file = |v: &str| {
+            format!(r#"{{"name": "room", "scans": ["a", "b"], "poses": [{pose}, {pose}]{v}}}"#)
+        };
+        let load = |name: &str, v: &str| Problem::load(write(name, &file(v)), None);
+        assert_eq!(load("v0.json", "").unwrap().viewpoints, [None, None]);
+        let origin = load("v1.json", r#", "viewpoints": "origin""#).unwrap();
+        assert_eq!(origin.viewpoints, [Some([0.0; 3]), Some([0.0; 3])]);
+        let each = load("v2.json", r#", "viewpoints": [[1, 2, 3], null]"#).unwrap();
+        assert_eq!(each.viewpoints, [Some([1.0, 2.0, 3.0]), None]);
+        let e = load("v3.json", r#", "viewpoints": "above""#).unwrap_err();
+        assert!(e.to_string().contains(r#"got "above""#), "{e}");
+        let e = load("v4.json", r#", "viewpoints": [[1, 2, 3]]"#).unwrap_err();
+        assert!(e.to_string().contains("2 scans, 1 given"), "{e}");
     }
 
     #[test]
