@@ -13,7 +13,7 @@ use crate::loss::{CappedDistanceLoss, InlierLoss, Loss};
 use crate::refine::RefineCloud;
 use crate::se3::{translation, Rigid, Transform};
 use crate::search::{IndexedCloud, SearchMethod};
-use crate::verdict::{check_edge, EdgeCheck, MAX_FREE_SPACE};
+use crate::verdict::{check_edge, EdgeCheck, HYPOTHESIS_FREE_SPACE};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use std::time::Instant;
@@ -401,14 +401,14 @@ impl PreparedProblem {
     }
 
     /// The `poses` (cloud `s` -> cloud `d`, centred frames) that put no surface where a
-    /// scanner saw through ([`MAX_FREE_SPACE`]); all of them when every one does (for the
+    /// scanner saw through ([`HYPOTHESIS_FREE_SPACE`]); all of them when every one does (for the
     /// verdict to say so) or without viewpoints.
     pub(crate) fn clear_of_free_space(&self, s: usize, d: usize, poses: Vec<Rigid>) -> Vec<Rigid> {
         let clear: Vec<Rigid> = poses
             .iter()
             .filter(|r| {
                 self.free_space_violation(s, d, r)
-                    .is_none_or(|v| v <= MAX_FREE_SPACE)
+                    .is_none_or(|v| v <= HYPOTHESIS_FREE_SPACE)
             })
             .copied()
             .collect();

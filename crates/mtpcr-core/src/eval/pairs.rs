@@ -267,6 +267,10 @@ pub struct PairRecord {
     /// The most feature matches a hypothesis that is a different pose explains.
     #[serde(default)]
     pub rival_support: Option<usize>,
+    /// The share of one fragment put where the other's camera saw through (see
+    /// [`crate::verdict::MAX_FREE_SPACE`]; absent in records of older versions).
+    #[serde(default)]
+    pub free_space: Option<f64>,
     /// Seconds of the registration (reading the files excluded).
     pub seconds: f64,
     /// The estimate, rows of the 4x4 matrix (the moved source into the target).
@@ -330,6 +334,7 @@ pub fn run_pair(
         residual: check.map_or(0.0, |c| c.residual),
         support: check.and_then(|c| c.support),
         rival_support: check.and_then(|c| c.rival_support),
+        free_space: check.and_then(|c| c.free_space),
         seconds: result.seconds,
         t_target_source: crate::io::matrix_rows(&estimate),
     };

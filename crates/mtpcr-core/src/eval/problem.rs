@@ -154,12 +154,14 @@ impl Problem {
         let viewpoints = match file.viewpoints {
             None => vec![None; n],
             Some(ViewpointsField::Named(w)) if w == "origin" => vec![Some([0.0; 3]); n],
-            Some(ViewpointsField::Named(w)) => return Err(Error::malformed(
-                path,
-                format!(
+            Some(ViewpointsField::Named(w)) => {
+                return Err(Error::malformed(
+                    path,
+                    format!(
                     "viewpoints must be \"origin\" or one [x, y, z] or null per scan, got \"{w}\""
                 ),
-            )),
+                ))
+            }
             Some(ViewpointsField::Each(v)) => {
                 if v.len() != n || v.iter().flatten().flatten().any(|x| !x.is_finite()) {
                     return Err(Error::malformed(
