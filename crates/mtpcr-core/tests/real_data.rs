@@ -90,3 +90,51 @@ fn most_of_a_sample_of_3dmatch_pairs_is_registered() {
     // RR is about 0.7 on the whole benchmark; a sample of six under half would be a regression.
     assert!(summary.registered >= 3, "{records:#?}");
 }
+
+#[test]
+#[cfg_attr(
+    not(shared_data),
+    ignore = "needs ../shared (or MTPCR_SHARED_DIR), not found at build time"
+)]
+fn on_3dlomatch_pairs_right_poses_keep_out_of_free_space_and_wrong_ones_do_not() {
+    use mtpcr_core::eval::pairs::{run_benchmark, PairBenchmark};
+    use mtpcr_core::verdict::MAX_FREE_SPACE;
+    use std::ops::ControlFlow;
+    let dir = common::shared_dir().join("data/3dmatch/benchmarks/3DLoMatch");
+    let mut benchmark = PairBenchmark::load(&dir, None).unwrap_or_else(|e| panic!("{e}"));
+    benchmark.sample(12, 5);
+    let records = run_benchmark(&benchmark, &Config::default(), 0, false, &[], &mut |_| {
+        ControlFlow::Continue(())
+    })
+    .unwrap_or_else(|e| panic!("{e}"));
+    // The benchmark gives each fragment its camera (the origin) as viewpoint.
+    let free: Vec<(bool, bool, f64)> = records
+        .iter()
+        .map(|r| {
+            let f = r
+                .free_space
+                .unwrap_or_else(|| panic!("no free space: {r:#?}"));
+            (r.registered, r.confident, f)
+        })
+        .collect();
+    let median = |registered: bool| {
+        let mut v: Vec<f64> = free
+            .iter()
+            .filter(|x| x.0 == registered)
+            .map(|x| x.2)
+            .collect();
+        assert!(
+            !v.is_empty(),
+            "no pair with registered = {registered}: {free:?}"
+        );
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    assert!(median(true) < 0.05, "{free:?}");
+    assert!(median(false) > median(true), "{free:?}");
+    assert!(
+        free.iter()
+            .all(|&(_, confident, f)| !confident || f <= MAX_FREE_SPACE),
+        "{free:?}"
+    );
+}

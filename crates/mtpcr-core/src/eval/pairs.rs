@@ -527,6 +527,7 @@ mod tests {
             residual: 0.1,
             support: Some(40),
             rival_support: Some(5),
+            free_space: Some(0.01),
             seconds: 1.0,
             t_target_source: [[0.0; 4]; 4],
         };
@@ -558,6 +559,7 @@ mod tests {
             residual: 0.1,
             support: None,
             rival_support: None,
+            free_space: None,
             seconds: 1.0,
             t_target_source: [[0.0; 4]; 4],
         }
