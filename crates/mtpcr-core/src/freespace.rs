@@ -148,7 +148,7 @@ impl Panorama {
     fn cell_of(&self, p: &[f64; 3]) -> Option<(usize, usize, f64)> {
         let d = self.axes * (Vector3::from(*p) - self.viewpoint);
         let range = d.norm();
-        if !(range > 0.0) {
+        if range.is_nan() || range <= 0.0 {
             return None;
         }
         let azimuth = d[1].atan2(d[0]) + std::f64::consts::PI;
