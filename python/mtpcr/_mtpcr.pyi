@@ -415,7 +415,7 @@ def evaluate_pairs(
     in the benchmark's order (the lines of ``mtpcr eval --records``: ``benchmark``, ``pair``
     (``scene/target-source``), ``seed``, ``moved``, ``re_deg``, ``te``, ``registered``,
     ``confident``, ``reasons``, ``overlap``, ``residual``, ``support``, ``rival_support``,
-    ``seconds``, ``t_target_source``) and their summary (``pairs``, ``registered``,
+    ``free_space``, ``seconds``, ``t_target_source``) and their summary (``pairs``, ``registered``,
     ``recall`` in percent, ``re_deg`` and ``te`` over the registered pairs or None,
     ``median_seconds``, ``failed``, ``failed_confident``, ``registered_doubted``).
 

@@ -31,6 +31,7 @@ RECORD_FIELDS = {
     "residual",
     "support",
     "rival_support",
+    "free_space",
     "seconds",
     "t_target_source",
 }
