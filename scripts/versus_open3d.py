@@ -19,8 +19,9 @@ benchmark folder's grandparent), read once with ``mtpcr.read_points``; the groun
 scene's ``gt.log`` (``x_i = T x_j``). For each pair both methods run in this process, one after
 the other (which goes first alternates from pair to pair), on the same float64 arrays:
 
-- mtpcr: ``mtpcr.register(source, target, seed=<the record's seed>, num_threads=2)``
-  (``Config()``); its ``T12`` maps the source into the target;
+- mtpcr: ``mtpcr.register(source, target, seed=<the record's seed>, num_threads=2,
+  viewpoints="origin")`` (``Config()``; the fragments lie in their cameras' frames, as
+  ``mtpcr eval`` assumes); its ``T12`` maps the source into the target;
 - Open3D: the standard FPFH + RANSAC global registration used as the baseline on 3DMatch
   (Open3D's global-registration tutorial with the 3DMatch settings of the literature, e.g.
   PointDSC / SC2-PCR): each fragment voxel-downsampled at 5 cm, normals (radius 10 cm,
@@ -145,7 +146,7 @@ def pair_errors(estimate, truth):
 
 def run_mtpcr_pair(source, target, seed):
     """mtpcr on one pair: the source-to-target transform and the verdict's `confident`."""
-    result = mtpcr.register(source, target, seed=seed, num_threads=2)
+    result = mtpcr.register(source, target, seed=seed, num_threads=2, viewpoints="origin")
     return np.asarray(result.T12), bool(result.confident)
 
 
