@@ -10,6 +10,7 @@
 //! free space; one within the margin lies on the surface. The measure of a pose is the share
 //! of the other scan's points in free space among those in free space or on the surface.
 
+use crate::cloud::PointCloud;
 use crate::se3::Rigid;
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 
@@ -72,14 +73,14 @@ impl Panorama {
     /// give no usable spacing (all at the viewpoint, or fewer than 3).
     fn new(points: &[[f64; 3]], viewpoint: [f64; 3]) -> Option<Panorama> {
         let stride = points.len().div_ceil(MAX_PANORAMA_POINTS).max(1);
-        let drawn: Vec<[f64; 3]> = points.iter().step_by(stride).copied().collect();
+        let drawn = PointCloud::new(points.iter().step_by(stride).copied().collect());
         if drawn.len() < 3 {
             return None;
         }
         let v = Vector3::from(viewpoint);
         let mut moment = Matrix3::zeros();
         let mut ranges = Vec::with_capacity(drawn.len());
-        for p in &drawn {
+        for p in drawn.points() {
             let d = Vector3::from(*p) - v;
             let r = d.norm();
             if r > 0.0 {
@@ -99,7 +100,7 @@ impl Panorama {
         let axes = Matrix3::from_rows(&[e1.transpose(), e2.transpose(), e1.cross(&e2).transpose()]);
         ranges.sort_by(f64::total_cmp);
         let median_range = ranges[ranges.len() / 2];
-        let spacing = crate::cloud::PointCloud::new(drawn.clone()).mean_nearest_neighbor_distance();
+        let spacing = drawn.mean_nearest_neighbor_distance();
         if !(spacing > 0.0 && median_range > 0.0) {
             return None;
         }
@@ -118,7 +119,7 @@ impl Panorama {
             margin: MARGIN_SPACINGS * spacing,
         };
         let mut seen = vec![f32::INFINITY; columns * rows];
-        for p in &drawn {
+        for p in drawn.points() {
             if let Some((c, r, range)) = space.cell_of(p) {
                 let k = r * columns + c;
                 seen[k] = seen[k].min(range as f32);
