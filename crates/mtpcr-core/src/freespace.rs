@@ -159,11 +159,11 @@ impl Panorama {
         Some((c, r, range))
     }
 
-    /// Of `probes` moved by `pose` into this scan's frame: how many lie in free space and how
-    /// many on the surface (within the margin of the nearest one).
-    fn count(&self, probes: &[[f64; 3]], pose: &Rigid) -> (usize, usize) {
+    /// Of every `stride`-th of `probes` moved by `pose` into this scan's frame: how many lie
+    /// in free space and how many on the surface (within the margin of the nearest one).
+    fn count(&self, probes: &[[f64; 3]], stride: usize, pose: &Rigid) -> (usize, usize) {
         let (mut free, mut surface) = (0, 0);
-        for p in probes {
+        for p in probes.iter().step_by(stride) {
             let Some((c, r, range)) = self.cell_of(&pose.apply(p)) else {
                 continue;
             };
@@ -190,6 +190,29 @@ pub(crate) fn violation(
     target: &FreeSpace,
     t_target_source: &Rigid,
 ) -> Option<f64> {
+    violation_of_every(source, target, t_target_source, 1)
+}
+
+/// Probes used by [`rough_violation`]: one in this many.
+const ROUGH_STRIDE: usize = 4;
+
+/// [`violation`] from a quarter of the probes: for the feature search, which asks about
+/// hundreds of poses.
+pub(crate) fn rough_violation(
+    source: &FreeSpace,
+    target: &FreeSpace,
+    t_target_source: &Rigid,
+) -> Option<f64> {
+    violation_of_every(source, target, t_target_source, ROUGH_STRIDE)
+}
+
+/// [`violation`] from every `stride`-th probe.
+fn violation_of_every(
+    source: &FreeSpace,
+    target: &FreeSpace,
+    t_target_source: &Rigid,
+    stride: usize,
+) -> Option<f64> {
     let share = |(free, surface): (usize, usize)| {
         if free + surface < MIN_PROBES_SEEN {
             0.0
@@ -200,11 +223,11 @@ pub(crate) fn violation(
     let into_target = target
         .panorama
         .as_ref()
-        .map(|p| share(p.count(&source.probes, t_target_source)));
+        .map(|p| share(p.count(&source.probes, stride, t_target_source)));
     let into_source = source
         .panorama
         .as_ref()
-        .map(|p| share(p.count(&target.probes, &t_target_source.inverse())));
+        .map(|p| share(p.count(&target.probes, stride, &t_target_source.inverse())));
     match (into_target, into_source) {
         (None, None) => None,
         (a, b) => Some(a.unwrap_or(0.0).max(b.unwrap_or(0.0))),

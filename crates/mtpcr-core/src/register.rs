@@ -102,9 +102,12 @@ impl PreparedProblem {
         if edges == 1 {
             // A pair: the pose explaining the most feature matches, the evolution's or a
             // hypothesis (on scenes, the largest overlap often belongs to a wrong pose that
-            // lays floor on floor and wall on wall; the matches tell the places apart).
+            // lays floor on floor and wall on wall; the matches tell the places apart),
+            // with viewpoints discounted by the free space it violates.
             if let Some(m) = &matches[0] {
-                evolved[0] = best_supported(m, evolved[0], &hypotheses[0]);
+                let e = graph.edges()[0];
+                let clearance = |r: &Rigid| self.free_space_clearance(e.source, e.target, r);
+                evolved[0] = best_supported(m, evolved[0], &hypotheses[0], clearance);
             }
         }
         let (centred, refined_poses) = if config.refine_iterations > 0 {
@@ -350,14 +353,23 @@ impl PreparedProblem {
     }
 }
 
-/// Of `evolved` and the `hypotheses` of a pair (centred poses), the one that explains the
-/// most feature matches; `evolved` on a tie.
-fn best_supported(matches: &PairMatches, evolved: Rigid, hypotheses: &[Rigid]) -> Rigid {
-    let support = |r: &Rigid| matches.support(&r.to_matrix());
-    let mut best = (support(&evolved), evolved);
+/// Of `evolved` and the `hypotheses` of a pair (centred poses), the one with the most
+/// feature matches explained times its `clearance` (in [0, 1]), then the most matches;
+/// `evolved` on a tie.
+fn best_supported(
+    matches: &PairMatches,
+    evolved: Rigid,
+    hypotheses: &[Rigid],
+    clearance: impl Fn(&Rigid) -> f64,
+) -> Rigid {
+    let score = |r: &Rigid| {
+        let support = matches.support(&r.to_matrix());
+        (support as f64 * clearance(r), support)
+    };
+    let mut best = (score(&evolved), evolved);
     for h in hypotheses {
-        let s = support(h);
-        if s > best.0 {
+        let s = score(h);
+        if s.0 > best.0 .0 || (s.0 == best.0 .0 && s.1 > best.0 .1) {
             best = (s, *h);
         }
     }

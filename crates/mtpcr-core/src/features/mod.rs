@@ -9,10 +9,13 @@
 //! 1. [`describe`]: voxel-downsample (one point per occupied voxel, the mean of its points),
 //!    estimate normals by local plane fits, orient them ([`NormalOrientation`]), compute the
 //!    33-bin FPFH of every keypoint;
-//! 2. [`candidates`]: match descriptors by nearest neighbour ([`Matching`]); RANSAC on
+//! 2. [`candidates`]: match descriptors by nearest neighbour ([`Matching`]); hypotheses from
+//!    the matches' compatibility graph (up to 1000 seed matches, each fitted with the 30
+//!    matches sharing the most compatible matches with it, as SC2-PCR), then RANSAC on
 //!    triples of matches, each draw pruned by the edge-length, distance and normal checks
 //!    before all matches are counted, keeping the best DISTINCT hypotheses (3 per candidate
-//!    asked for); refine each by least squares on the matches it fits, then point-to-plane
+//!    asked for; [`PairMatches::candidates_where`] keeps only poses a caller's rule
+//!    accepts); refine each by least squares on the matches it fits, then point-to-plane
 //!    ICP on the keypoints; rank by the matches fitted within half the inlier distance; drop
 //!    any candidate within 10 degrees and 2 voxels of a better one.
 //!
@@ -375,7 +378,20 @@ impl PairMatches {
     /// [`candidates`] from these matches (`source` and `target` as given to
     /// [`PairMatches::new`]).
     pub fn candidates(&self, source: &Features, target: &Features) -> Vec<Candidate> {
-        ransac::candidates(&self.set, source, target, &self.config)
+        ransac::candidates(&self.set, source, target, &self.config, &|_| true)
+    }
+
+    /// [`PairMatches::candidates`] searched only among the poses `keep` accepts (maps source
+    /// into target, as the candidates): a rule the matches cannot see, such as free space,
+    /// keeps the search's room for poses that can be right.
+    pub fn candidates_where(
+        &self,
+        source: &Features,
+        target: &Features,
+        keep: &(dyn Fn(&Transform) -> bool + Sync),
+    ) -> Vec<Candidate> {
+        let keep = |r: &Rigid| keep(&r.to_matrix());
+        ransac::candidates(&self.set, source, target, &self.config, &keep)
     }
 
     /// Matches that `t_target_source` maps within half the inlier distance, their normals

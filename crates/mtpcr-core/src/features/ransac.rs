@@ -130,13 +130,14 @@ pub(super) fn candidates(
     source: &Features,
     target: &Features,
     config: &FeatureConfig,
+    keep: &(dyn Fn(&Rigid) -> bool + Sync),
 ) -> Vec<Candidate> {
     let matched = &set.matched;
     if matched.len() < 3 {
         return Vec::new();
     }
     let same = |a: &Rigid, b: &Rigid| set.same(a, b, config);
-    let pool = search(matched, config, &same);
+    let pool = search(matched, config, &same, keep);
     let Ok(tree) = ImmutableKdTree::<f64, 3>::new_from_slice(&target.points) else {
         return Vec::new();
     };
@@ -267,6 +268,7 @@ fn search(
     matched: &Matched,
     config: &FeatureConfig,
     same: &(impl Fn(&Rigid, &Rigid) -> bool + Sync),
+    keep: &(dyn Fn(&Rigid) -> bool + Sync),
 ) -> Vec<Hypothesis> {
     let m = matched.len();
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
@@ -274,15 +276,50 @@ fn search(
         kept: Vec::new(),
         capacity: (POOL_PER_CANDIDATE * config.num_candidates).max(10),
     };
+    let mut found = consensus_hypotheses(matched, config);
+    // Best first, so that `keep` is asked only about poses that would enter the pool.
+    found.sort_by_key(|h| std::cmp::Reverse(h.score));
+    let mut rest = found.into_iter().peekable();
+    loop {
+        // The next few that could enter the pool, their `keep` asked in parallel.
+        let mut batch = Vec::new();
+        while batch.len() < KEEP_BATCH {
+            let Some(h) = rest.next_if(|h| {
+                !(pool.full() && pool.kept.last().is_some_and(|l| l.score >= h.score))
+            }) else {
+                break;
+            };
+            if !pool.covers(&h, same) {
+                batch.push(h);
+            }
+        }
+        if batch.is_empty() {
+            break;
+        }
+        let kept: Vec<bool> = batch.par_iter().map(|h| keep(&h.pose)).collect();
+        for (h, k) in batch.into_iter().zip(kept) {
+            if k {
+                pool.offer(h, same);
+            }
+        }
+    }
     let mut needed = config.max_iterations;
+    if let Some(best) = pool.kept.first() {
+        needed = needed.min(draws_needed(best.score, m, config.confidence, needed));
+    }
     let mut done = 0;
     while done < needed {
         let batch = BATCH.min(needed - done);
         let draws: Vec<[usize; 3]> = (0..batch).map(|_| draw_three(&mut rng, m)).collect();
+        // Only a hypothesis that could enter the pool is worth `keep`'s time.
+        let floor = match pool.kept.last() {
+            Some(last) if pool.full() => last.score,
+            _ => 0,
+        };
         let found: Vec<Option<Hypothesis>> = draws
             .par_iter()
             .with_min_len(32)
-            .map(|d| try_triple(d, matched, config))
+            .map(|d| try_triple(d, matched, config).filter(|h| h.score > floor && keep(&h.pose)))
             .collect();
         for h in found.into_iter().flatten() {
             pool.offer(h, same);
@@ -298,6 +335,122 @@ fn search(
         }
     }
     pool.kept
+}
+
+/// Hypotheses whose `keep` is asked together.
+const KEEP_BATCH: usize = 16;
+/// Seeds of [`consensus_hypotheses`]: the matches compatible with the most others, no two
+/// within the inlier distance of each other on both sides.
+const CONSENSUS_SEEDS: usize = 1000;
+/// Matches joined to each seed: those sharing the most compatible matches with it.
+const CONSENSUS_SIZE: usize = 30;
+/// Most matches the compatibility graph is built over (a stride sample of them beyond).
+const MAX_CONSENSUS_MATCHES: usize = 5000;
+
+/// Hypotheses from the compatibility graph of the matches, as SC2-PCR (Chen et al., CVPR
+/// 2022): two matches are compatible when they keep their distance (within the inlier
+/// distance); each seed match is fitted with the [`CONSENSUS_SIZE`] compatible matches that
+/// share the most compatible matches with it (second-order compatibility), then refitted on
+/// those that fit. Where RANSAC's triples are mostly outliers (a scene pair at 10-30 %
+/// overlap), these seeds still find the true pose: on 150 3DLoMatch pairs it was among the
+/// 10 candidates for 41 % of them instead of 33 %.
+fn consensus_hypotheses(matched: &Matched, config: &FeatureConfig) -> Vec<Hypothesis> {
+    let m = matched.len();
+    if m < 3 {
+        return Vec::new();
+    }
+    let stride = m.div_ceil(MAX_CONSENSUS_MATCHES);
+    let ids: Vec<usize> = (0..m).step_by(stride).collect();
+    let n = ids.len();
+    let tau = config.inlier_distance;
+    let rows = compatibility(matched, &ids, tau);
+    let degree: Vec<u32> = rows
+        .iter()
+        .map(|r| r.iter().map(|w| w.count_ones()).sum())
+        .collect();
+    let mut order: Vec<usize> = (0..n).collect();
+    order.sort_by_key(|&a| (std::cmp::Reverse(degree[a]), a));
+    let r2 = tau * tau;
+    let mut seeds: Vec<usize> = Vec::new();
+    for a in order {
+        if seeds.len() == CONSENSUS_SEEDS || degree[a] < 2 {
+            break;
+        }
+        let i = ids[a];
+        let near = |b: &usize| {
+            let j = ids[*b];
+            dist2(&matched.src[i], &matched.src[j]) < r2
+                && dist2(&matched.tgt[i], &matched.tgt[j]) < r2
+        };
+        if !seeds.iter().any(near) {
+            seeds.push(a);
+        }
+    }
+    seeds
+        .par_iter()
+        .filter_map(|&a| {
+            let row = &rows[a];
+            let mut joined: Vec<(u32, usize)> = (0..n)
+                .filter(|&b| row[b / 64] >> (b % 64) & 1 == 1)
+                .map(|b| {
+                    let shared = row.iter().zip(&rows[b]).map(|(x, y)| (x & y).count_ones());
+                    (shared.sum::<u32>(), b)
+                })
+                .collect();
+            joined.sort_by_key(|&(s, b)| (std::cmp::Reverse(s), b));
+            joined.truncate(CONSENSUS_SIZE);
+            let mut set: Vec<usize> = std::iter::once(a)
+                .chain(joined.iter().map(|&(_, b)| b))
+                .map(|b| ids[b])
+                .collect();
+            let mut pose = kabsch(set.iter().map(|&k| (&matched.src[k], &matched.tgt[k])))?;
+            for _ in 0..3 {
+                set.retain(|&k| matched.fits(k, &pose, matched.d2));
+                pose = kabsch(set.iter().map(|&k| (&matched.src[k], &matched.tgt[k])))?;
+            }
+            let score = matched.count(&pose, matched.d2);
+            Some(Hypothesis { score, pose })
+        })
+        .collect()
+}
+
+/// Bit rows of the compatibility graph of the matches `ids`: bit `b` of row `a` is set when
+/// matches `ids[a]` and `ids[b]` (a != b) keep their distance within `tau` on both sides.
+fn compatibility(matched: &Matched, ids: &[usize], tau: f64) -> Vec<Vec<u64>> {
+    // Single precision, one coordinate at a time: the inner loop vectorises (the distances
+    // of a room are metres, the tolerance centimetres).
+    let column =
+        |v: &[[f64; 3]], k: usize| -> Vec<f32> { ids.iter().map(|&i| v[i][k] as f32).collect() };
+    let s = [0, 1, 2].map(|k| column(&matched.src, k));
+    let t = [0, 1, 2].map(|k| column(&matched.tgt, k));
+    let n = ids.len();
+    let tau = tau as f32;
+    (0..n)
+        .into_par_iter()
+        .with_min_len(16)
+        .map(|a| {
+            let mut row = vec![0u64; n.div_ceil(64)];
+            let mut gap = [0f32; 64];
+            for (w, word) in row.iter_mut().enumerate() {
+                let lo = w * 64;
+                let hi = (lo + 64).min(n);
+                for (b, g) in (lo..hi).zip(gap.iter_mut()) {
+                    let ds = (s[0][b] - s[0][a]).powi(2)
+                        + (s[1][b] - s[1][a]).powi(2)
+                        + (s[2][b] - s[2][a]).powi(2);
+                    let dt = (t[0][b] - t[0][a]).powi(2)
+                        + (t[1][b] - t[1][a]).powi(2)
+                        + (t[2][b] - t[2][a]).powi(2);
+                    *g = (ds.sqrt() - dt.sqrt()).abs();
+                }
+                for (k, g) in gap[..hi - lo].iter().enumerate() {
+                    *word |= u64::from(*g < tau) << k;
+                }
+            }
+            row[a / 64] &= !(1 << (a % 64));
+            row
+        })
+        .collect()
 }
 
 /// Draws for a triple of inliers to be seen with probability `confidence` when `inliers` of
@@ -497,16 +650,22 @@ struct Pool {
 }
 
 impl Pool {
-    fn offer(&mut self, h: Hypothesis, same: &impl Fn(&Rigid, &Rigid) -> bool) {
-        let full = self.kept.len() == self.capacity;
-        if full && self.kept.last().is_some_and(|l| l.score >= h.score) {
-            return;
-        }
-        if self
-            .kept
+    fn full(&self) -> bool {
+        self.kept.len() == self.capacity
+    }
+
+    /// Is `h` the same pose as a kept hypothesis that scores at least as well?
+    fn covers(&self, h: &Hypothesis, same: &impl Fn(&Rigid, &Rigid) -> bool) -> bool {
+        self.kept
             .iter()
             .any(|k| k.score >= h.score && same(&k.pose, &h.pose))
-        {
+    }
+
+    fn offer(&mut self, h: Hypothesis, same: &impl Fn(&Rigid, &Rigid) -> bool) {
+        if self.full() && self.kept.last().is_some_and(|l| l.score >= h.score) {
+            return;
+        }
+        if self.covers(&h, same) {
             return;
         }
         self.kept.retain(|k| !same(&k.pose, &h.pose));

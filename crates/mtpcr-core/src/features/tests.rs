@@ -423,3 +423,51 @@ fn features_support_is_the_candidates_score_and_the_truth_has_the_most() {
     assert!(!matches.same_pose(&truth, &wrong));
     assert!(matches.support(&truth) > 10 * matches.support(&wrong).max(1));
 }
+
+/// A pair of matched keypoint sets where only `inliers` of `total` descriptor matches are
+/// true: every source keypoint has an exact descriptor twin in the target, at the truth for
+/// the first `inliers`, anywhere for the rest (a room pair at low overlap, in miniature).
+fn mostly_wrong_matches(inliers: usize, total: usize, truth: &Rigid) -> (Features, Features) {
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    let mut cube = || std::array::from_fn(|_| rng.random_range(-2.0..2.0));
+    let (mut source, mut target) = (Features::default(), Features::default());
+    for k in 0..total {
+        let p: [f64; 3] = cube();
+        let q = if k < inliers { truth.apply(&p) } else { cube() };
+        let n = Vector3::new(0.3, -0.2, 1.0).normalize();
+        let d: Descriptor = std::array::from_fn(|b| ((k * 31 + b * 7) % 97) as f32);
+        source.points.push(p);
+        source.normals.push([n[0], n[1], n[2]]);
+        source.descriptors.push(d);
+        let turned = Rigid {
+            t: [0.0; 3],
+            ..*truth
+        }
+        .apply(&[n[0], n[1], n[2]]);
+        target.points.push(q);
+        target.normals.push(turned);
+        target.descriptors.push(d);
+    }
+    (source, target)
+}
+
+#[test]
+fn features_consensus_finds_the_pose_among_few_true_matches_without_ransac() {
+    let truth = Rigid::from_matrix(&decode(&[0.4, -1.1, 0.7, 0.3, -0.2, 0.5]));
+    let (source, target) = mostly_wrong_matches(40, 1000, &truth);
+    // One RANSAC draw: whatever is found comes from the compatibility graph.
+    let config = FeatureConfig {
+        max_iterations: 1,
+        icp_iterations: 0,
+        ..FeatureConfig::for_spacing(0.05)
+    };
+    let found = candidates(&source, &target, &config).unwrap();
+    let best = &found.first().expect("a candidate").t_target_source;
+    assert!(rotation_error_deg(best, &truth.to_matrix()) < 1.0);
+    assert!(translation_error(best, &truth.to_matrix()) < 0.05);
+    // A rule that refuses the truth leaves no candidate near it.
+    let matches = PairMatches::new(&source, &target, &config).unwrap();
+    let far = |t: &Transform| rotation_error_deg(t, &truth.to_matrix()) > 20.0;
+    let refused = matches.candidates_where(&source, &target, &far);
+    assert!(refused.iter().all(|c| far(&c.t_target_source)));
+}
