@@ -21,7 +21,7 @@ use crate::ea::{Observer, Progress, Stage};
 use crate::error::{Error, Result};
 use crate::graph::Edge;
 use crate::loss::Loss;
-use crate::problem::PreparedProblem;
+use crate::problem::{HypothesisSearch, PreparedProblem};
 use crate::refine::refine_poses;
 use crate::result::{EdgeEstimate, Registration, Unplaced};
 use crate::se3::{invert_rigid, rotation_error_deg, translation_error, Rigid, Transform};
@@ -611,7 +611,8 @@ fn screen(
 /// One pair's hypotheses with their overlap and support, best overlap first.
 fn screen_pair(prepared: &PreparedProblem, edge: Edge, count: usize) -> Result<Pair> {
     let loss = prepared.inlier_loss(edge.source, edge.target);
-    let Some((matches, hypotheses)) = prepared.pair_hypotheses(edge.source, edge.target, count)?
+    let Some((matches, hypotheses)) =
+        prepared.pair_hypotheses(edge.source, edge.target, count, HypothesisSearch::Screening)?
     else {
         return Ok(Pair::unmatched(edge));
     };

@@ -10,7 +10,7 @@ use crate::features::PairMatches;
 use crate::interrupt::Interrupt;
 use crate::loss::Loss;
 use crate::multiview::{best_closing_triple, loop_tolerance, register_unordered};
-use crate::problem::{thread_pool, PreparedProblem};
+use crate::problem::{thread_pool, HypothesisSearch, PreparedProblem};
 use crate::refine::refine_poses;
 use crate::result::{EdgeEstimate, Registration};
 use crate::se3::{
@@ -61,7 +61,12 @@ impl PreparedProblem {
                     // With viewpoints, a pose that puts a surface where a scanner saw
                     // through is no hypothesis of a pair or loop (on 3DMatch pairs: 87.0 and
                     // 30.7 % registered instead of 82.7 and 25.7).
-                    let found = self.pair_hypotheses(e.source, e.target, config.hypotheses)?;
+                    let found = self.pair_hypotheses(
+                        e.source,
+                        e.target,
+                        config.hypotheses,
+                        HypothesisSearch::Pair,
+                    )?;
                     Ok(found
                         .map(|(m, poses)| (m, self.clear_of_free_space(e.source, e.target, poses))))
                 })
@@ -158,7 +163,11 @@ impl PreparedProblem {
                 // A pair alone has nothing else to verify it; in a loop, the loop does (an
                 // edge found through the loop may explain fewer matches than a wrong pose).
                 match m {
-                    Some(m) if edges == 1 => with_support(check, m, t, h),
+                    Some(m) if edges == 1 => {
+                        let clearance =
+                            |r: &Rigid| self.free_space_clearance(e.source, e.target, r);
+                        with_support(check, m, t, h, clearance)
+                    }
                     _ => check,
                 }
             })
@@ -377,19 +386,20 @@ fn best_supported(
 }
 
 /// `check` with the feature support of the returned pose `t` and the best support among the
-/// `hypotheses` that are not the same pose (centred poses).
+/// `hypotheses` that are not the same pose (centred poses), each discounted by its
+/// `clearance` as when the pose was chosen ([`best_supported`]).
 fn with_support(
     check: EdgeCheck,
     matches: &PairMatches,
     t: &Rigid,
     hypotheses: &[Rigid],
+    clearance: impl Fn(&Rigid) -> f64,
 ) -> EdgeCheck {
     let t = t.to_matrix();
     let rival = hypotheses
         .iter()
-        .map(Rigid::to_matrix)
-        .filter(|h| !matches.same_pose(h, &t))
-        .map(|h| matches.support(&h))
+        .filter(|h| !matches.same_pose(&h.to_matrix(), &t))
+        .map(|h| (matches.support(&h.to_matrix()) as f64 * clearance(h)).round() as usize)
         .max()
         .unwrap_or(0);
     EdgeCheck {

@@ -113,6 +113,11 @@ pub struct FeatureConfig {
     pub feature_max_neighbours: usize,
     /// Which descriptor matches are used (default [`Matching::BothWays`]).
     pub matching: Matching,
+    /// Seed matches of the compatibility-graph hypotheses (0 turns them off; default 1000):
+    /// the matches compatible with the most others, each fitted with the matches sharing the
+    /// most compatible matches with it. Where RANSAC's triples are mostly outliers (scene
+    /// pairs at 10-30 % overlap) they find the true pose far more often.
+    pub consensus_seeds: usize,
     /// Most RANSAC draws (>= 1; default 100000).
     pub max_iterations: usize,
     /// RANSAC stops early once a draw of three inliers would have been seen with this
@@ -148,6 +153,11 @@ pub struct FeatureConfig {
 /// Fewest keypoints a described cloud keeps (fewer give empty features).
 const MIN_KEYPOINTS: usize = 10;
 
+/// [`FeatureConfig::consensus_seeds`] by default. On 150 3DLoMatch pairs (seed 1) 100 seeds
+/// put a right pose among 30 candidates for 47 % of them, 300 for 55 %, none 34 %; most
+/// pairs have fewer distinct seeds than 1000 (see `ransac::consensus_hypotheses`).
+pub const DEFAULT_CONSENSUS_SEEDS: usize = 1000;
+
 /// Fewest mutual matches [`Matching::Mutual`] keeps before falling back to one-way matches.
 pub const MIN_MUTUAL_MATCHES: usize = 30;
 
@@ -160,8 +170,8 @@ impl FeatureConfig {
     /// The defaults for keypoints `voxel` apart, Open3D's usual recipe where it has one:
     /// normals over 2 voxels (30 neighbours), FPFH over 5 voxels (100 neighbours), inliers
     /// within 1.5 voxels, 100000 draws at confidence 0.999, edge-length checker 0.9; then
-    /// matches both ways, normals within 60 degrees, 15 rounds of ICP, 10 candidates at least
-    /// 10 degrees or 2 voxels apart; seed 0.
+    /// matches both ways, 1000 compatibility-graph seeds, normals within 60 degrees, 15 rounds
+    /// of ICP, 10 candidates at least 10 degrees or 2 voxels apart; seed 0.
     pub fn for_spacing(voxel: f64) -> FeatureConfig {
         FeatureConfig {
             voxel,
@@ -171,6 +181,7 @@ impl FeatureConfig {
             feature_radius: 5.0 * voxel,
             feature_max_neighbours: 100,
             matching: Matching::BothWays,
+            consensus_seeds: DEFAULT_CONSENSUS_SEEDS,
             max_iterations: 100_000,
             confidence: 0.999,
             edge_length_ratio: 0.9,
