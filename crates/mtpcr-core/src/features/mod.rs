@@ -9,13 +9,13 @@
 //! 1. [`describe`]: voxel-downsample (one point per occupied voxel, the mean of its points),
 //!    estimate normals by local plane fits, orient them ([`NormalOrientation`]), compute the
 //!    33-bin FPFH of every keypoint;
-//! 2. [`candidates`]: match descriptors by nearest neighbour ([`Matching`]); hypotheses from
-//!    the matches' compatibility graph (up to 1000 seed matches, each fitted with the 30
-//!    matches sharing the most compatible matches with it, as SC2-PCR), then RANSAC on
+//! 2. [`candidates`]: match descriptors by nearest neighbour ([`Matching`]); RANSAC on
 //!    triples of matches, each draw pruned by the edge-length, distance and normal checks
-//!    before all matches are counted, keeping the best DISTINCT hypotheses (3 per candidate
-//!    asked for; [`PairMatches::candidates_where`] keeps only poses a caller's rule
-//!    accepts); refine each by least squares on the matches it fits, then point-to-plane
+//!    before all matches are counted; where RANSAC does not reach its confidence (few
+//!    inliers), hypotheses from the matches' compatibility graph too (up to 1000 seed
+//!    matches, each fitted with the 30 matches sharing the most compatible matches with it,
+//!    as SC2-PCR); keeping the best DISTINCT hypotheses (3 per candidate asked for;
+//!    [`PairMatches::candidates_where`] keeps only poses a caller's rule accepts); refine each by least squares on the matches it fits, then point-to-plane
 //!    ICP on the keypoints; rank by the matches fitted within half the inlier distance; drop
 //!    any candidate within 10 degrees and 2 voxels of a better one.
 //!

@@ -276,37 +276,7 @@ fn search(
         kept: Vec::new(),
         capacity: (POOL_PER_CANDIDATE * config.num_candidates).max(10),
     };
-    let mut found = consensus_hypotheses(matched, config);
-    // Best first, so that `keep` is asked only about poses that would enter the pool.
-    found.sort_by_key(|h| std::cmp::Reverse(h.score));
-    let mut rest = found.into_iter().peekable();
-    loop {
-        // The next few that could enter the pool, their `keep` asked in parallel.
-        let mut batch = Vec::new();
-        while batch.len() < KEEP_BATCH {
-            let Some(h) = rest.next_if(|h| {
-                !(pool.full() && pool.kept.last().is_some_and(|l| l.score >= h.score))
-            }) else {
-                break;
-            };
-            if !pool.covers(&h, same) {
-                batch.push(h);
-            }
-        }
-        if batch.is_empty() {
-            break;
-        }
-        let kept: Vec<bool> = batch.par_iter().map(|h| keep(&h.pose)).collect();
-        for (h, k) in batch.into_iter().zip(kept) {
-            if k {
-                pool.offer(h, same);
-            }
-        }
-    }
     let mut needed = config.max_iterations;
-    if let Some(best) = pool.kept.first() {
-        needed = needed.min(draws_needed(best.score, m, config.confidence, needed));
-    }
     let mut done = 0;
     while done < needed {
         let batch = BATCH.min(needed - done);
@@ -332,6 +302,39 @@ fn search(
                 config.confidence,
                 config.max_iterations,
             ));
+        }
+    }
+    // Where RANSAC could not reach its confidence (too few inliers among the matches: a
+    // scene pair at low overlap), the compatibility graph's seeds search on; where it could
+    // (the object scans), they would add nothing but time.
+    if done < config.max_iterations {
+        return pool.kept;
+    }
+    let mut found = consensus_hypotheses(matched, config);
+    // Best first, so that `keep` is asked only about poses that would enter the pool.
+    found.sort_by_key(|h| std::cmp::Reverse(h.score));
+    let mut rest = found.into_iter().peekable();
+    loop {
+        // The next few that could enter the pool, their `keep` asked in parallel.
+        let mut batch = Vec::new();
+        while batch.len() < KEEP_BATCH {
+            let Some(h) = rest.next_if(|h| {
+                !(pool.full() && pool.kept.last().is_some_and(|l| l.score >= h.score))
+            }) else {
+                break;
+            };
+            if !pool.covers(&h, same) {
+                batch.push(h);
+            }
+        }
+        if batch.is_empty() {
+            break;
+        }
+        let kept: Vec<bool> = batch.par_iter().map(|h| keep(&h.pose)).collect();
+        for (h, k) in batch.into_iter().zip(kept) {
+            if k {
+                pool.offer(h, same);
+            }
         }
     }
     pool.kept
