@@ -421,10 +421,12 @@ fn consensus_hypotheses(matched: &Matched, config: &FeatureConfig) -> Vec<Hypoth
 /// Bit rows of the compatibility graph of the matches `ids`: bit `b` of row `a` is set when
 /// matches `ids[a]` and `ids[b]` (a != b) keep their distance within `tau` on both sides.
 fn compatibility(matched: &Matched, ids: &[usize], tau: f64) -> Vec<Vec<u64>> {
-    // Single precision, one coordinate at a time: the inner loop vectorises (the distances
-    // of a room are metres, the tolerance centimetres).
-    let column =
-        |v: &[[f64; 3]], k: usize| -> Vec<f32> { ids.iter().map(|&i| v[i][k] as f32).collect() };
+    // Single precision, one coordinate at a time, so that the inner loop vectorises; about
+    // the points' centroid, so that far-off coordinates (a survey's) keep their precision.
+    let column = |v: &[[f64; 3]], k: usize| -> Vec<f32> {
+        let centre = ids.iter().map(|&i| v[i][k]).sum::<f64>() / ids.len().max(1) as f64;
+        ids.iter().map(|&i| (v[i][k] - centre) as f32).collect()
+    };
     let s = [0, 1, 2].map(|k| column(&matched.src, k));
     let t = [0, 1, 2].map(|k| column(&matched.tgt, k));
     let n = ids.len();

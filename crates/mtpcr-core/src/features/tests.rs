@@ -5,7 +5,7 @@
 use super::describe::{pair_features, voxel_downsample};
 use super::ransac::{kabsch, rotation_angle_deg};
 use super::*;
-use crate::se3::{decode, random_rigid, rotation_error_deg, translation_error, Rigid};
+use crate::se3::{decode, random_rigid, rotation_error_deg, translation, translation_error, Rigid};
 use crate::synthetic::three_views;
 use nalgebra::Vector3;
 use rand::{RngExt, SeedableRng};
@@ -465,6 +465,16 @@ fn features_consensus_finds_the_pose_among_few_true_matches_without_ransac() {
     let best = &found.first().expect("a candidate").t_target_source;
     assert!(rotation_error_deg(best, &truth.to_matrix()) < 1.0);
     assert!(translation_error(best, &truth.to_matrix()) < 0.05);
+    // The same far from the origin (a survey's coordinates): as precise.
+    let far_away = |f: &Features, by: f64| Features {
+        points: f.points.iter().map(|p| p.map(|c| c + by)).collect(),
+        ..f.clone()
+    };
+    let (shifted_source, shifted_target) = (far_away(&source, 4.0e7), far_away(&target, -3.0e7));
+    let truth_shifted = translation([-3.0e7; 3]) * truth.to_matrix() * translation([-4.0e7; 3]);
+    let found = candidates(&shifted_source, &shifted_target, &config).unwrap();
+    let best = &found.first().expect("a candidate far away").t_target_source;
+    assert!(rotation_error_deg(best, &truth_shifted) < 1.0);
     // A rule that refuses the truth leaves no candidate near it.
     let matches = PairMatches::new(&source, &target, &config).unwrap();
     let far = |t: &Transform| rotation_error_deg(t, &truth.to_matrix()) > 20.0;
