@@ -97,8 +97,9 @@ pub struct EdgeCheck {
     /// Descriptor matches of the pair that the transform explains (see
     /// [`crate::features::PairMatches::support`]); `None` without feature matching.
     pub support: Option<usize>,
-    /// The most matches explained by a feature hypothesis that is a different pose (and
-    /// keeps out of free space, with viewpoints).
+    /// The most matches explained by a feature hypothesis that is a different pose (with
+    /// viewpoints: among those kept out of free space, each discounted by the free space it
+    /// violates, as in the choice of the pose).
     pub rival_support: Option<usize>,
     /// The share of one scan's points put where the other scanner saw through (the larger
     /// direction; see [`MAX_FREE_SPACE`]); `None` without viewpoints.

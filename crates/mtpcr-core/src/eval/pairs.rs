@@ -264,7 +264,8 @@ pub struct PairRecord {
     /// Feature matches the estimate explains.
     #[serde(default)]
     pub support: Option<usize>,
-    /// The most feature matches a hypothesis that is a different pose explains.
+    /// The most feature matches a hypothesis that is a different pose explains (discounted
+    /// by its free space, see [`crate::verdict::EdgeCheck::rival_support`]).
     #[serde(default)]
     pub rival_support: Option<usize>,
     /// The share of one fragment put where the other's camera saw through (see
