@@ -9,6 +9,14 @@
 //! scan, moved by a pose, that falls in a cell nearer than that surface by a margin is in
 //! free space; one within the margin lies on the surface. The measure of a pose is the share
 //! of the other scan's points in free space among those in free space or on the surface.
+//!
+//! The scanners themselves stand in the room they scan: a pose that puts one scan's viewpoint
+//! behind a surface the other scanner saw (farther along that direction than the surface, by
+//! the margin) puts a wall between two scanners of one room. Such a pose counts as entirely
+//! in free space. On 600 3DMatch / 3DLoMatch pairs (seeds 1 and 2) this held for 3 of the 881
+//! right poses returned and for 110 of the 319 wrong ones, 9 of which the verdict had called
+//! confident (turned over, or across the room: their points landed behind the other's
+//! surfaces, where free space sees nothing).
 
 use crate::cloud::PointCloud;
 use crate::se3::Rigid;
@@ -159,6 +167,15 @@ impl Panorama {
         Some((c, r, range))
     }
 
+    /// Does `p` (this scan's frame) lie behind the surface seen in its direction (farther than
+    /// the nearest surface by more than the margin)? False where nothing was seen.
+    fn hides(&self, p: &[f64; 3]) -> bool {
+        self.cell_of(p).is_some_and(|(c, r, range)| {
+            let nearest = self.nearest[r * self.columns + c] as f64;
+            nearest.is_finite() && range > nearest + self.margin
+        })
+    }
+
     /// Of every `stride`-th of `probes` moved by `pose` into this scan's frame: how many lie
     /// in free space and how many on the surface (within the margin of the nearest one).
     fn count(&self, probes: &[[f64; 3]], stride: usize, pose: &Rigid) -> (usize, usize) {
@@ -220,6 +237,13 @@ fn violation_of_every(
             free as f64 / (free + surface) as f64
         }
     };
+    if let (Some(s), Some(t)) = (&source.panorama, &target.panorama) {
+        let source_viewpoint = t_target_source.apply(&s.viewpoint.into());
+        let target_viewpoint = t_target_source.inverse().apply(&t.viewpoint.into());
+        if t.hides(&source_viewpoint) || s.hides(&target_viewpoint) {
+            return Some(1.0);
+        }
+    }
     let into_target = target
         .panorama
         .as_ref()
@@ -297,5 +321,32 @@ mod tests {
             None
         );
         assert!(violation(&blind, &target, &wrong).unwrap() > 0.3);
+    }
+
+    #[test]
+    fn a_scanner_put_behind_a_wall_the_other_saw_is_in_free_space() {
+        let target_points = corner();
+        let truth = pose(10.0, [0.4, 0.0, 0.0]);
+        let back = truth.inverse();
+        let source_points: Vec<[f64; 3]> = target_points.iter().map(|p| back.apply(p)).collect();
+        let source = FreeSpace::new(&source_points, Some([0.0; 3]));
+        let target = FreeSpace::new(&target_points, Some([0.0; 3]));
+        let panorama = target.panorama.as_ref().unwrap();
+        assert!(panorama.hides(&[0.0, 0.0, 4.0]));
+        assert!(!panorama.hides(&[0.0, 0.0, 2.0]));
+        // Four metres further back, the source's camera stands behind the target's back
+        // wall, and its points land behind it too, where the target saw nothing: no point is
+        // in free space, yet the pose is impossible.
+        let behind = pose(10.0, [0.4, 0.0, 4.0]);
+        let (free, surface) = panorama.count(&source.probes, 1, &behind);
+        assert!(
+            free + surface < MIN_PROBES_SEEN,
+            "{free} free, {surface} on the surface"
+        );
+        assert_eq!(violation(&source, &target, &behind), Some(1.0));
+        assert!(violation(&source, &target, &truth).unwrap() < 0.02);
+        // Only with both viewpoints known: one scanner's position is needed to place it.
+        let blind = FreeSpace::new(&source_points, None);
+        assert!(violation(&blind, &target, &behind).unwrap() < 0.02);
     }
 }

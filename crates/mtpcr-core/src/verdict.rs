@@ -102,7 +102,8 @@ pub struct EdgeCheck {
     /// violates, as in the choice of the pose).
     pub rival_support: Option<usize>,
     /// The share of one scan's points put where the other scanner saw through (the larger
-    /// direction; see [`MAX_FREE_SPACE`]); `None` without viewpoints.
+    /// direction; see [`MAX_FREE_SPACE`]), 1 when one scanner stands behind a surface the
+    /// other saw (see [`crate::freespace`]); `None` without viewpoints.
     pub free_space: Option<f64>,
 }
 
@@ -204,6 +205,10 @@ pub(crate) fn doubts(edges: &[EdgeCheck]) -> Vec<Option<String>> {
                     "clouds {name} lie on each other {:.0} times less closely than each scan on itself (at most {SELF_RESIDUAL_RATIO} expected): near, but not the same surface",
                     e.residual / e.self_residual.max(f64::MIN_POSITIVE)
                 ))
+            } else if e.free_space.is_some_and(|f| f >= 1.0) {
+                Some(format!(
+                    "clouds {name}: every point of one scan lies where the other scanner saw through, or one scanner stands behind a surface the other saw: the scans cannot both be there"
+                ))
             } else if let Some(free) = e.free_space.filter(|&f| f > MAX_FREE_SPACE) {
                 Some(format!(
                     "clouds {name}: {:.0} % of one scan's points lie where the other scanner saw through (at most {:.0} % expected): the surfaces cannot both be there",
@@ -275,6 +280,8 @@ mod tests {
         assert_eq!(d(Some(MAX_FREE_SPACE)), None);
         let why = d(Some(0.4)).unwrap();
         assert!(why.contains("40 % of one scan's points"), "{why}");
+        let why = d(Some(1.0)).unwrap();
+        assert!(why.contains("behind a surface the other saw"), "{why}");
         // Known free space lightens the feature tests: 12 matches against a rival's 6.
         let seen = |free: Option<f64>| {
             doubts(&[EdgeCheck {
