@@ -202,33 +202,38 @@ fn median(mut v: Vec<f64>) -> f64 {
 /// neighbourhoods are nearly flat keeps them (see [`NOISY_VARIATION`]). Sizes are tried
 /// smallest first, so a clean scan costs one small query per probe.
 fn neighbourhood_size(tree: &ImmutableKdTree<f64, 3>, points: &[[f64; 3]]) -> usize {
-    let stride = points.len().div_ceil(NOISE_PROBES).max(1);
-    let probes: Vec<&[f64; 3]> = points.iter().step_by(stride).collect();
     let mut size = 1;
     for (rung, &m) in NEIGHBOURHOOD_LADDER.iter().enumerate() {
         size = m.min(points.len()).max(1);
-        let k = std::num::NonZero::new(size).expect("k >= 1");
-        let variations: Vec<f64> = probes
-            .par_iter()
-            .map(|p| {
-                let nn = tree
-                    .query(p)
-                    .nearest_n::<SquaredEuclidean<f64>>(k)
-                    .execute();
-                plane_fit(nn.iter().map(|r| &points[r.item as usize])).variation
-            })
-            .collect();
-        let variation = median(variations);
         let flat = if rung == 0 {
             NOISY_VARIATION
         } else {
             FLAT_VARIATION
         };
-        if variation <= flat || size == points.len() {
+        if median_variation(tree, points, size) <= flat || size == points.len() {
             break;
         }
     }
     size
+}
+
+/// The median surface variation of the plane fits over `size` nearest neighbours, over
+/// [`NOISE_PROBES`] points of `points` (an even stride subset).
+fn median_variation(tree: &ImmutableKdTree<f64, 3>, points: &[[f64; 3]], size: usize) -> f64 {
+    let k = std::num::NonZero::new(size.max(1)).expect("k >= 1");
+    let stride = points.len().div_ceil(NOISE_PROBES).max(1);
+    let variations: Vec<f64> = points
+        .par_iter()
+        .step_by(stride)
+        .map(|p| {
+            let nn = tree
+                .query(p)
+                .nearest_n::<SquaredEuclidean<f64>>(k)
+                .execute();
+            plane_fit(nn.iter().map(|r| &points[r.item as usize])).variation
+        })
+        .collect();
+    median(variations)
 }
 
 impl RefineCloud {
@@ -630,19 +635,7 @@ mod tests {
         // not noise averaged (the rule before climbed to 24 here).
         let points = bumpy_voxel_surface();
         let tree = ImmutableKdTree::<f64, 3>::new_from_slice(&points).unwrap();
-        let k = std::num::NonZero::new(12).unwrap();
-        let variations: Vec<f64> = points
-            .iter()
-            .step_by(points.len().div_ceil(NOISE_PROBES))
-            .map(|p| {
-                let nn = tree
-                    .query(p)
-                    .nearest_n::<SquaredEuclidean<f64>>(k)
-                    .execute();
-                plane_fit(nn.iter().map(|r| &points[r.item as usize])).variation
-            })
-            .collect();
-        assert!(median(variations) > FLAT_VARIATION);
+        assert!(median_variation(&tree, &points, 12) > FLAT_VARIATION);
         assert_eq!(neighbourhood_size(&tree, &points), 12);
     }
 
