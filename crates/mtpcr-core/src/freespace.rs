@@ -16,7 +16,10 @@
 //! in free space. On 600 3DMatch / 3DLoMatch pairs (seeds 1 and 2) this held for 3 of the 881
 //! right poses returned and for 110 of the 319 wrong ones, 9 of which the verdict had called
 //! confident (turned over, or across the room: their points landed behind the other's
-//! surfaces, where free space sees nothing).
+//! surfaces, where free space sees nothing). What this assumes: two scans of one room or
+//! open space. Scanners in two rooms that overlap only through a door, each behind a wall
+//! the other saw, break it: their right pose is then not searched and is doubted (give such
+//! scans no viewpoints).
 
 use crate::cloud::PointCloud;
 use crate::se3::Rigid;
