@@ -225,15 +225,23 @@ fn median_variation(tree: &ImmutableKdTree<f64, 3>, points: &[[f64; 3]], size: u
     let variations: Vec<f64> = points
         .par_iter()
         .step_by(stride)
-        .map(|p| {
-            let nn = tree
-                .query(p)
-                .nearest_n::<SquaredEuclidean<f64>>(k)
-                .execute();
-            plane_fit(nn.iter().map(|r| &points[r.item as usize])).variation
-        })
+        .map(|p| plane_around(tree, points, p, k).variation)
         .collect();
     median(variations)
+}
+
+/// The plane fitted to the `k` nearest of `points` (indexed by `tree`) to `p`.
+fn plane_around(
+    tree: &ImmutableKdTree<f64, 3>,
+    points: &[[f64; 3]],
+    p: &[f64; 3],
+    k: std::num::NonZero<usize>,
+) -> PlaneFit {
+    let nn = tree
+        .query(p)
+        .nearest_n::<SquaredEuclidean<f64>>(k)
+        .execute();
+    plane_fit(nn.iter().map(|r| &points[r.item as usize]))
 }
 
 impl RefineCloud {
@@ -266,11 +274,7 @@ impl RefineCloud {
             .par_iter()
             .step_by(stride)
             .map(|p| {
-                let nn = tree
-                    .query(p)
-                    .nearest_n::<SquaredEuclidean<f64>>(k)
-                    .execute();
-                let fit = plane_fit(nn.iter().map(|r| &points[r.item as usize]));
+                let fit = plane_around(&tree, &points, p, k);
                 let (x, n) = (Vector3::from(*p), fit.normal);
                 let on_plane = x - n * n.dot(&(x - fit.centroid));
                 ([on_plane[0], on_plane[1], on_plane[2]], [n[0], n[1], n[2]])
