@@ -5,7 +5,7 @@
 use crate::cloud::{PointCloud, Sampling};
 use crate::config::{Config, Order};
 use crate::error::{Error, Result};
-use crate::features::{describe, FeatureConfig, Features, PairMatches, DEFAULT_CONSENSUS_SEEDS};
+use crate::features::{describe, FeatureConfig, Features, PairMatches};
 use crate::freespace::{rough_violation, violation, FreeSpace};
 use crate::graph::{Edge, ViewGraph};
 use crate::interrupt::Interrupt;
@@ -370,7 +370,7 @@ impl PreparedProblem {
             return Ok(None);
         };
         let consensus_seeds = match search {
-            HypothesisSearch::Pair => DEFAULT_CONSENSUS_SEEDS,
+            HypothesisSearch::Pair => config.consensus_seeds,
             HypothesisSearch::Screening => 0,
         };
         let config = FeatureConfig {
@@ -465,8 +465,8 @@ impl PreparedProblem {
 /// How a pair's hypotheses are searched.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum HypothesisSearch {
-    /// A pair or a loop, which must be solved: compatibility-graph seeds
-    /// ([`DEFAULT_CONSENSUS_SEEDS`]) and RANSAC, the search kept clear of free space.
+    /// A pair or a loop, which must be solved: compatibility-graph seeds (the features'
+    /// [`FeatureConfig::consensus_seeds`]) and RANSAC, the search kept clear of free space.
     Pair,
     /// One of the many pairs of a scan set, most of which do not overlap: RANSAC alone, no
     /// free-space filter. On the 3DMatch rooms the seeds made screening 4-5 times slower and
