@@ -213,6 +213,37 @@ pub(crate) fn violation(
     violation_of_every(source, target, t_target_source, 1)
 }
 
+/// The share of all of one scan's probes that `t_target_source` puts in the other's free
+/// space (the larger of the two directions; `None` when neither scan has a viewpoint). Unlike
+/// [`violation`], not a share of the probes seen and no scanner test: for scans that need not
+/// overlap (at the true poses of the five visible 3DMatch rooms, 9 784 pairs of fragments:
+/// at most 0.2, 0.066 in four of the rooms; the share of the probes seen exceeded 0.15 for
+/// 436 pairs, and 175 put a scanner behind the other's surfaces, behind furniture or in
+/// the next room).
+pub(crate) fn free_share(
+    source: &FreeSpace,
+    target: &FreeSpace,
+    t_target_source: &Rigid,
+) -> Option<f64> {
+    let share = |free: usize, probes: &[[f64; 3]]| free as f64 / probes.len().max(1) as f64;
+    let into_target = target.panorama.as_ref().map(|p| {
+        share(
+            p.count(&source.probes, 1, t_target_source).0,
+            &source.probes,
+        )
+    });
+    let into_source = source.panorama.as_ref().map(|p| {
+        share(
+            p.count(&target.probes, 1, &t_target_source.inverse()).0,
+            &target.probes,
+        )
+    });
+    match (into_target, into_source) {
+        (None, None) => None,
+        (a, b) => Some(a.unwrap_or(0.0).max(b.unwrap_or(0.0))),
+    }
+}
+
 /// Probes used by [`rough_violation`]: one in this many.
 const ROUGH_STRIDE: usize = 4;
 
@@ -262,14 +293,14 @@ fn violation_of_every(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::se3::Rigid;
     use nalgebra::{Rotation3, Vector3};
 
     /// A corner of a room seen from the origin looking along +z: a back wall at z = 3 and a
     /// floor at y = -1, on a 2.5 cm grid.
-    fn corner() -> Vec<[f64; 3]> {
+    pub(crate) fn corner() -> Vec<[f64; 3]> {
         let mut points = Vec::new();
         for i in -40..=40 {
             for j in -40..=40 {
@@ -282,7 +313,8 @@ mod tests {
         points
     }
 
-    fn pose(degrees: f64, shift: [f64; 3]) -> Rigid {
+    /// A turn of `degrees` about +y, then a shift.
+    pub(crate) fn pose(degrees: f64, shift: [f64; 3]) -> Rigid {
         let r = Rotation3::from_axis_angle(&Vector3::y_axis(), degrees.to_radians());
         let mut m = crate::se3::Transform::identity();
         m.fixed_view_mut::<3, 3>(0, 0).copy_from(r.matrix());
@@ -351,5 +383,29 @@ mod tests {
         // Only with both viewpoints known: one scanner's position is needed to place it.
         let blind = FreeSpace::new(&source_points, None);
         assert!(violation(&blind, &target, &behind).unwrap() < 0.02);
+    }
+
+    #[test]
+    fn the_share_of_all_probes_in_free_space_has_no_scanner_test() {
+        let target_points = corner();
+        let truth = pose(10.0, [0.4, 0.0, 0.0]);
+        let back = truth.inverse();
+        let source_points: Vec<[f64; 3]> = target_points.iter().map(|p| back.apply(p)).collect();
+        let source = FreeSpace::new(&source_points, Some([0.0; 3]));
+        let target = FreeSpace::new(&target_points, Some([0.0; 3]));
+        assert!(free_share(&source, &target, &truth).unwrap() < 0.02);
+        // Half a metre towards the target's camera: the back wall (half the points) floats
+        // in seen-through air.
+        let near = free_share(&source, &target, &pose(10.0, [0.4, 0.0, -0.5])).unwrap();
+        assert!(near > 0.3, "shifted pose: {near}");
+        // Behind the target's back wall nothing was seen: for scans that need not overlap
+        // that is no evidence, and the scanner test does not apply.
+        let behind = free_share(&source, &target, &pose(10.0, [0.4, 0.0, 4.0])).unwrap();
+        assert!(behind < 0.02, "behind: {behind}");
+        let blind = |points: &[[f64; 3]]| FreeSpace::new(points, None);
+        assert_eq!(
+            free_share(&blind(&source_points), &blind(&target_points), &truth),
+            None
+        );
     }
 }

@@ -6,7 +6,7 @@ use crate::cloud::{PointCloud, Sampling};
 use crate::config::{Config, Order};
 use crate::error::{Error, Result};
 use crate::features::{describe, FeatureConfig, Features, PairMatches};
-use crate::freespace::{rough_violation, violation, FreeSpace};
+use crate::freespace::{free_share, rough_violation, violation, FreeSpace};
 use crate::graph::{Edge, ViewGraph};
 use crate::interrupt::Interrupt;
 use crate::loss::{CappedDistanceLoss, InlierLoss, Loss};
@@ -409,6 +409,16 @@ impl PreparedProblem {
             return None;
         }
         violation(&self.free_space[s], &self.free_space[d], t)
+    }
+
+    /// The share of all probes of one scan that `t` (cloud `s` -> cloud `d`, centred frames)
+    /// puts in the other's free space ([`crate::freespace::free_share`]); `None` without
+    /// viewpoints.
+    pub(crate) fn free_space_share(&self, s: usize, d: usize, t: &Rigid) -> Option<f64> {
+        if self.free_space.is_empty() {
+            return None;
+        }
+        free_share(&self.free_space[s], &self.free_space[d], t)
     }
 
     /// How far `t` (cloud `s` -> cloud `d`, centred frames) keeps out of free space: 1 with
