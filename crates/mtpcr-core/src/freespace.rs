@@ -358,12 +358,20 @@ pub(crate) mod tests {
         assert!(violation(&blind, &target, &wrong).unwrap() > 0.3);
     }
 
-    #[test]
-    fn a_scanner_put_behind_a_wall_the_other_saw_is_in_free_space() {
+    /// The corner seen by the target's scanner, and by a source scanner 0.4 m to its right,
+    /// turned 10 degrees (its scan, in its own frame, is the corner moved by the inverse of
+    /// its pose): the true pose, the source's points, the target's.
+    fn corner_seen_twice() -> (Rigid, Vec<[f64; 3]>, Vec<[f64; 3]>) {
         let target_points = corner();
         let truth = pose(10.0, [0.4, 0.0, 0.0]);
         let back = truth.inverse();
-        let source_points: Vec<[f64; 3]> = target_points.iter().map(|p| back.apply(p)).collect();
+        let source_points = target_points.iter().map(|p| back.apply(p)).collect();
+        (truth, source_points, target_points)
+    }
+
+    #[test]
+    fn a_scanner_put_behind_a_wall_the_other_saw_is_in_free_space() {
+        let (truth, source_points, target_points) = corner_seen_twice();
         let source = FreeSpace::new(&source_points, Some([0.0; 3]));
         let target = FreeSpace::new(&target_points, Some([0.0; 3]));
         let panorama = target.panorama.as_ref().unwrap();
@@ -387,10 +395,7 @@ pub(crate) mod tests {
 
     #[test]
     fn the_share_of_all_probes_in_free_space_has_no_scanner_test() {
-        let target_points = corner();
-        let truth = pose(10.0, [0.4, 0.0, 0.0]);
-        let back = truth.inverse();
-        let source_points: Vec<[f64; 3]> = target_points.iter().map(|p| back.apply(p)).collect();
+        let (truth, source_points, target_points) = corner_seen_twice();
         let source = FreeSpace::new(&source_points, Some([0.0; 3]));
         let target = FreeSpace::new(&target_points, Some([0.0; 3]));
         assert!(free_share(&source, &target, &truth).unwrap() < 0.02);
