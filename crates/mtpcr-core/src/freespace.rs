@@ -225,19 +225,28 @@ pub(crate) fn free_share(
     target: &FreeSpace,
     t_target_source: &Rigid,
 ) -> Option<f64> {
-    let share = |free: usize, probes: &[[f64; 3]]| free as f64 / probes.len().max(1) as f64;
-    let into_target = target.panorama.as_ref().map(|p| {
-        share(
-            p.count(&source.probes, 1, t_target_source).0,
-            &source.probes,
-        )
-    });
-    let into_source = source.panorama.as_ref().map(|p| {
-        share(
-            p.count(&target.probes, 1, &t_target_source.inverse()).0,
-            &target.probes,
-        )
-    });
+    larger_way(source, target, t_target_source, 1, |(free, _), probes| {
+        free as f64 / probes.max(1) as f64
+    })
+}
+
+/// The larger over both directions of `measure((free, surface), probes)`: one scan's
+/// probes (every `stride`-th; `probes` of them exist) moved into the other's panorama;
+/// `None` when neither scan has one.
+fn larger_way(
+    source: &FreeSpace,
+    target: &FreeSpace,
+    t_target_source: &Rigid,
+    stride: usize,
+    measure: impl Fn((usize, usize), usize) -> f64,
+) -> Option<f64> {
+    let one_way = |from: &FreeSpace, into: &FreeSpace, pose: &Rigid| {
+        into.panorama
+            .as_ref()
+            .map(|p| measure(p.count(&from.probes, stride, pose), from.probes.len()))
+    };
+    let into_target = one_way(source, target, t_target_source);
+    let into_source = one_way(target, source, &t_target_source.inverse());
     match (into_target, into_source) {
         (None, None) => None,
         (a, b) => Some(a.unwrap_or(0.0).max(b.unwrap_or(0.0))),
@@ -264,13 +273,6 @@ fn violation_of_every(
     t_target_source: &Rigid,
     stride: usize,
 ) -> Option<f64> {
-    let share = |(free, surface): (usize, usize)| {
-        if free + surface < MIN_PROBES_SEEN {
-            0.0
-        } else {
-            free as f64 / (free + surface) as f64
-        }
-    };
     if let (Some(s), Some(t)) = (&source.panorama, &target.panorama) {
         let source_viewpoint = t_target_source.apply(&s.viewpoint.into());
         let target_viewpoint = t_target_source.inverse().apply(&t.viewpoint.into());
@@ -278,18 +280,19 @@ fn violation_of_every(
             return Some(1.0);
         }
     }
-    let into_target = target
-        .panorama
-        .as_ref()
-        .map(|p| share(p.count(&source.probes, stride, t_target_source)));
-    let into_source = source
-        .panorama
-        .as_ref()
-        .map(|p| share(p.count(&target.probes, stride, &t_target_source.inverse())));
-    match (into_target, into_source) {
-        (None, None) => None,
-        (a, b) => Some(a.unwrap_or(0.0).max(b.unwrap_or(0.0))),
-    }
+    larger_way(
+        source,
+        target,
+        t_target_source,
+        stride,
+        |(free, surface), _| {
+            if free + surface < MIN_PROBES_SEEN {
+                0.0
+            } else {
+                free as f64 / (free + surface) as f64
+            }
+        },
+    )
 }
 
 #[cfg(test)]
