@@ -4,8 +4,7 @@
 use super::{Candidate, Descriptor, FeatureConfig, Features, Matching};
 use super::{DESCRIPTOR_LEN, MIN_MUTUAL_MATCHES};
 use crate::se3::Rigid;
-use crate::search::QueryAnchor;
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use crate::search::{NearestGrid, QueryAnchor};
 use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -138,12 +137,11 @@ pub(super) fn candidates(
     }
     let same = |a: &Rigid, b: &Rigid| set.same(a, b, config);
     let pool = search(matched, config, &same, keep);
-    let Ok(tree) = ImmutableKdTree::<f64, 3>::new_from_slice(&target.points) else {
-        return Vec::new();
-    };
+    // The refinement pairs keypoints within the inlier distance at most.
+    let grid = NearestGrid::new(&target.points, matched.d2.sqrt());
     let mut refined: Vec<Candidate> = pool
         .par_iter()
-        .map(|h| refine(h.pose, matched, source, target, &tree, config))
+        .map(|h| refine(h.pose, matched, source, target, &grid, config))
         .collect::<Vec<_>>()
         .into_iter()
         .flatten()
@@ -531,7 +529,7 @@ fn refine(
     matched: &Matched,
     source: &Features,
     target: &Features,
-    tree: &ImmutableKdTree<f64, 3>,
+    grid: &NearestGrid,
     config: &FeatureConfig,
 ) -> Option<Candidate> {
     let d2 = matched.d2;
@@ -560,20 +558,17 @@ fn refine(
                 if anchor.still_beyond(&q, d2.sqrt()) {
                     return None;
                 }
-                let nn = tree
-                    .query(&q)
-                    .nearest_one::<SquaredEuclidean<f64>>()
-                    .execute();
-                anchor.set(q, nn.distance.sqrt());
-                let j = nn.item as usize;
-                let ok = nn.distance <= d2
+                let nn = grid.nearest(&q);
+                anchor.set(q, nn.distance);
+                let (j, distance) = nn.hit?;
+                let ok = distance <= d2
                     && normals_agree(
                         pose,
                         &source.normals[i],
                         &target.normals[j],
                         matched.cos_min,
                     );
-                ok.then_some((i, j, nn.distance))
+                ok.then_some((i, j, distance))
             })
             .collect()
     };

@@ -10,6 +10,8 @@
 //! the same answers as the KD-tree) and [`DistanceField`] (O(1), within
 //! [`DistanceIndex::error_bound`] of the KD-tree). [`IndexedCloud`] holds a cloud's points with
 //! one index of each kind, chosen by [`SearchMethod`]; the losses take any of them.
+//! `NearestGrid` answers a third question, for the feature candidates' keypoint ICP: "which
+//! point is nearest, if one is within r?".
 //!
 //! **Adding a structure**: one file implementing [`InlierIndex`] or [`DistanceIndex`], one
 //! line in the oracle lists of this module's tests (which check it against the KD-tree on
@@ -20,10 +22,12 @@ mod grid;
 mod grid_frame;
 mod kdtree;
 mod lanes;
+mod nearest;
 
 pub use field::DistanceField;
 pub use grid::InlierGrid;
 pub use kdtree::KdTreeIndex;
+pub(crate) use nearest::NearestGrid;
 
 use crate::se3::Rigid;
 use std::sync::Arc;
