@@ -6,6 +6,7 @@
 //! kiddo (`../shared/TOOLCHAIN.md`).
 
 use super::dist2;
+use crate::cloud::bounds;
 
 /// Cells a grid holds at most (4 bytes each); a cloud spread wider gets wider cells.
 const MAX_CELLS: usize = 1 << 22;
@@ -33,18 +34,7 @@ pub(crate) struct Nearest {
 impl NearestGrid {
     /// The grid of `points` (finite) answering exactly for every query radius up to `radius`.
     pub(crate) fn new(points: &[[f64; 3]], radius: f64) -> NearestGrid {
-        let mut lo = [f64::INFINITY; 3];
-        let mut hi = [f64::NEG_INFINITY; 3];
-        for p in points {
-            for a in 0..3 {
-                lo[a] = lo[a].min(p[a]);
-                hi[a] = hi[a].max(p[a]);
-            }
-        }
-        if points.is_empty() {
-            lo = [0.0; 3];
-            hi = [0.0; 3];
-        }
+        let (lo, hi) = bounds(points);
         let extent = (0..3).map(|a| hi[a] - lo[a]).fold(0.0, f64::max);
         let mut cell = if radius > 0.0 && radius.is_finite() {
             radius
