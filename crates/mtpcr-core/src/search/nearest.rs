@@ -2,8 +2,8 @@
 //! that wide: the 27 cells around a query hold every point within the radius. The keypoint
 //! ICP of the feature candidates asks this of every keypoint in every round; with a KD-tree
 //! those queries were most of the time of screening a room's pairs (kiddo's `nearest_one`,
-//! 57 % of a 38-fragment room). A dense grid answers "any point within r" 3-5x faster than
-//! kiddo (`../shared/TOOLCHAIN.md`).
+//! 57 % of a 38-fragment room). With this grid the same answers came in 0.84x the time of
+//! 600 3DMatch / 3DLoMatch pairs and 0.85x that of the 38-fragment room (RESULTS.md, 2026-12-04).
 
 use super::dist2;
 use crate::cloud::bounds;
@@ -58,18 +58,18 @@ impl NearestGrid {
                 std::array::from_fn(|a| (((p[a] - lo[a]) / cell) as usize).min(dims[a] - 1));
             (c[2] * dims[1] + c[1]) * dims[0] + c[0]
         };
+        let cell_of: Vec<usize> = points.iter().map(index).collect();
         let cells = dims[0] * dims[1] * dims[2];
         let mut starts = vec![0u32; cells + 1];
-        for p in points {
-            starts[index(p) + 1] += 1;
+        for &c in &cell_of {
+            starts[c + 1] += 1;
         }
         for c in 0..cells {
             starts[c + 1] += starts[c];
         }
         let mut next = starts.clone();
         let mut sorted = vec![([0.0; 3], 0u32); points.len()];
-        for (i, p) in points.iter().enumerate() {
-            let c = index(p);
+        for (i, (p, &c)) in points.iter().zip(&cell_of).enumerate() {
             sorted[next[c] as usize] = (*p, i as u32);
             next[c] += 1;
         }
