@@ -25,6 +25,7 @@ use crate::loss::Loss;
 use crate::problem::{HypothesisSearch, PreparedProblem};
 use crate::refine::refine_poses;
 use crate::result::{EdgeEstimate, Registration, Unplaced};
+use crate::screening::{fingerprint, ScreenedPair, Screening};
 use crate::se3::{invert_rigid, rotation_error_deg, translation_error, Rigid, Transform};
 use crate::verdict::{
     doubts, judge, EdgeCheck, HYPOTHESIS_FREE_SPACE, MAX_RESIDUAL, MIN_OVERLAP, MIN_SUPPORT,
@@ -88,13 +89,15 @@ impl Pair {
 const MAX_ROUNDS: usize = 4;
 
 /// Registers the prepared clouds (a general graph; its edges are ignored) as an unordered
-/// set. Needs feature hypotheses (`config.hypotheses > 0`).
+/// set, screening every pair, or taking the pairs' hypotheses from `given` (see
+/// [`crate::screening`]). Needs feature hypotheses (`config.hypotheses > 0`).
 pub(crate) fn register_unordered(
     prepared: &PreparedProblem,
     config: &Config,
     pool: &rayon::ThreadPool,
     seed: u64,
     observer: Option<Observer<'_>>,
+    given: Option<&Screening>,
 ) -> Result<Registration> {
     let start = std::time::Instant::now();
     if config.hypotheses == 0 {
@@ -103,7 +106,19 @@ pub(crate) fn register_unordered(
             "must be at least 1 to register scans in no known order (or give them in loop order)",
         ));
     }
-    let (pairs, completed) = screen(prepared, config.hypotheses, pool, observer)?;
+    let (pairs, completed) = match given {
+        Some(screening) => (
+            from_screening(prepared, config.hypotheses, screening)?,
+            true,
+        ),
+        None => screen(
+            prepared,
+            &all_pairs(prepared),
+            config.hypotheses,
+            pool,
+            observer,
+        )?,
+    };
     prepared.interrupt().check()?;
     let chosen = choose(&pairs);
     // A chosen pose must also pass the verdict's surface and free-space tests.
@@ -601,25 +616,155 @@ fn refine_placed(
 /// Pairs screened in parallel between two progress reports.
 const SCREEN_BATCH: usize = 64;
 
-/// Every pair's hypotheses, scored by overlap and support, in parallel (results in pair
-/// order), in batches of [`SCREEN_BATCH`] pairs with a progress report after each, and
-/// whether every pair was screened: when the observer asks to stop, the pairs not yet
-/// screened are left without hypotheses.
-fn screen(
-    prepared: &PreparedProblem,
-    count: usize,
-    pool: &rayon::ThreadPool,
-    mut observer: Option<Observer<'_>>,
-) -> Result<(Vec<Pair>, bool)> {
+/// Every pair of the prepared clouds, in row order (`(0, 1), (0, 2), ..., (1, 2), ...`).
+fn all_pairs(prepared: &PreparedProblem) -> Vec<Edge> {
     let n = prepared.clouds().len();
-    let edges: Vec<Edge> = (0..n)
+    (0..n)
         .flat_map(|s| {
             (s + 1..n).map(move |t| Edge {
                 source: s,
                 target: t,
             })
         })
-        .collect();
+        .collect()
+}
+
+/// The pairs of a screening made elsewhere, checked against this problem, one per pair in
+/// row order (a pair it does not list has no hypotheses).
+fn from_screening(
+    prepared: &PreparedProblem,
+    hypotheses: usize,
+    screening: &Screening,
+) -> Result<Vec<Pair>> {
+    let index = screening.index_for(prepared, hypotheses)?;
+    Ok(all_pairs(prepared)
+        .into_iter()
+        .zip(index)
+        .map(|(edge, k)| match k {
+            Some(k) => {
+                let p = &screening.pairs[k];
+                Pair {
+                    edge,
+                    poses: p
+                        .poses
+                        .iter()
+                        .copied()
+                        .zip(p.overlaps.iter().copied())
+                        .collect(),
+                    supports: p.supports.clone(),
+                }
+            }
+            None => Pair::unmatched(edge),
+        })
+        .collect())
+}
+
+impl PreparedProblem {
+    /// The pair screening of four or more scans in no known order (what
+    /// [`PreparedProblem::register`] does first): the hypotheses of the given pairs (scans
+    /// numbered from 0; `None`: every pair), to be handed to
+    /// [`PreparedProblem::register_screened`] of the same clouds and settings, alone or
+    /// merged with the screenings of the other pairs ([`Screening::merge`]).
+    pub fn screen_pairs(
+        &self,
+        config: &Config,
+        pairs: Option<&[(usize, usize)]>,
+        observer: Option<Observer<'_>>,
+    ) -> Result<Screening> {
+        self.check_screenable(config)?;
+        let n = self.clouds().len();
+        let edges = match pairs {
+            None => all_pairs(self),
+            Some(pairs) => pairs
+                .iter()
+                .map(|&(s, t)| {
+                    if s >= t || t >= n {
+                        return Err(Error::InvalidInput(format!(
+                            "({s}, {t}) is not a pair of the {n} clouds (source < target, \
+                             numbered from 0)"
+                        )));
+                    }
+                    Ok(Edge {
+                        source: s,
+                        target: t,
+                    })
+                })
+                .collect::<Result<_>>()?,
+        };
+        let pool = crate::problem::thread_pool(config.num_threads)?;
+        let (screened, _) = screen(self, &edges, config.hypotheses, &pool, observer)?;
+        self.interrupt().check()?;
+        let screening = Screening {
+            fingerprint: fingerprint(self, config.hypotheses),
+            pairs: screened
+                .into_iter()
+                .map(|p| ScreenedPair {
+                    source: p.edge.source,
+                    target: p.edge.target,
+                    poses: p.poses.iter().map(|&(pose, _)| pose).collect(),
+                    overlaps: p.poses.iter().map(|&(_, o)| o).collect(),
+                    supports: p.supports,
+                })
+                .collect(),
+        };
+        if let Some((s, t)) = crate::screening::first_repeat(&screening.pairs) {
+            return Err(Error::InvalidInput(format!(
+                "pair ({s}, {t}) is listed more than once"
+            )));
+        }
+        Ok(screening)
+    }
+
+    /// [`PreparedProblem::register`] of four or more scans in no known order with the pair
+    /// screening done already ([`PreparedProblem::screen_pairs`], here or on other machines):
+    /// the same result as `register` when the screening covers every pair.
+    pub fn register_screened(
+        &self,
+        config: &Config,
+        screening: &Screening,
+        observer: Option<Observer<'_>>,
+    ) -> Result<Registration> {
+        let start = std::time::Instant::now();
+        self.check_screenable(config)?;
+        let seed = config.seed.unwrap_or_else(rand::random);
+        let pool = crate::problem::thread_pool(config.num_threads)?;
+        let mut result = register_unordered(self, config, &pool, seed, observer, Some(screening))?;
+        result.seconds = start.elapsed().as_secs_f64();
+        Ok(result)
+    }
+
+    /// Screening is for four or more scans in no known order, prepared with `config`.
+    fn check_screenable(&self, config: &Config) -> Result<()> {
+        config.validate()?;
+        self.check_prepared_with(config)?;
+        if self.graph().is_ring() || self.graph().edges().len() == 1 {
+            return Err(Error::InvalidInput(format!(
+                "pair screening is for four or more scans in no known order (order \"auto\"); \
+                 these {} scans are registered as a pair or a loop",
+                self.clouds().len()
+            )));
+        }
+        if config.hypotheses == 0 {
+            return Err(Error::config(
+                "hypotheses",
+                "must be at least 1 to screen pairs of scans in no known order",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The given pairs' hypotheses, scored by overlap and support, in parallel (results in the
+/// pairs' order), in batches of [`SCREEN_BATCH`] pairs with a progress report after each, and
+/// whether every pair was screened: when the observer asks to stop, the pairs not yet
+/// screened are left without hypotheses.
+fn screen(
+    prepared: &PreparedProblem,
+    edges: &[Edge],
+    count: usize,
+    pool: &rayon::ThreadPool,
+    mut observer: Option<Observer<'_>>,
+) -> Result<(Vec<Pair>, bool)> {
     let mut pairs = Vec::with_capacity(edges.len());
     for batch in edges.chunks(SCREEN_BATCH) {
         let screened: Vec<Pair> = pool.install(|| {

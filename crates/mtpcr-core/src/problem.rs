@@ -270,6 +270,16 @@ impl PreparedProblem {
         self.shift
     }
 
+    /// Cloud `v`'s centroid (subtracted from its points when preparing).
+    pub(crate) fn centroid(&self, v: usize) -> [f64; 3] {
+        self.centroids[v]
+    }
+
+    /// Cloud `v`'s keypoint features (`None` when prepared without hypotheses).
+    pub(crate) fn features_of(&self, v: usize) -> Option<&Features> {
+        self.features.as_ref().map(|(_, f)| &f[v])
+    }
+
     /// The flag this problem's registrations stop on.
     pub(crate) fn interrupt(&self) -> &Interrupt {
         &self.interrupt

@@ -13,6 +13,7 @@ use crate::multiview::{best_closing_triple, loop_tolerance, register_unordered};
 use crate::problem::{thread_pool, HypothesisSearch, PreparedProblem};
 use crate::refine::refine_poses;
 use crate::result::{EdgeEstimate, Registration};
+use crate::screening::Screening;
 use crate::se3::{
     decode, encode, invert_rigid, rotation_error_deg, translation_error, Individual, Rigid,
     Transform,
@@ -37,7 +38,7 @@ impl PreparedProblem {
         let pool = thread_pool(config.num_threads)?;
         let graph = self.graph();
         if !graph.is_ring() && graph.edges().len() != 1 {
-            let mut result = register_unordered(self, config, &pool, seed, observer)?;
+            let mut result = register_unordered(self, config, &pool, seed, observer, None)?;
             result.seconds = start.elapsed().as_secs_f64();
             return Ok(result);
         }
@@ -559,6 +560,42 @@ pub fn register_interruptible(
     config.seed = Some(config.seed.unwrap_or_else(rand::random));
     let prepared = PreparedProblem::new_with_interrupt(clouds, &config, interrupt)?;
     let mut result = prepared.register(&config, observer)?;
+    result.seconds = start.elapsed().as_secs_f64();
+    Ok(result)
+}
+
+/// The pair screening of four or more scans in no known order (`config.order` auto), the
+/// slow first step of [`register`]: the hypotheses of the given pairs (scans numbered from 0;
+/// `None`: every pair). Screen the pairs in pieces, anywhere, and hand the pieces
+/// ([`Screening::merge`]) to [`register_screened`] with the same clouds, seed and settings:
+/// the result is exactly [`register`]'s.
+pub fn screen_pairs(
+    clouds: &[PointCloud],
+    config: &Config,
+    pairs: Option<&[(usize, usize)]>,
+    observer: Option<Observer<'_>>,
+    interrupt: Interrupt,
+) -> Result<Screening> {
+    config.validate()?;
+    let prepared = PreparedProblem::new_with_interrupt(clouds, config, interrupt)?;
+    prepared.screen_pairs(config, pairs, observer)
+}
+
+/// [`register_interruptible`] of four or more scans in no known order, with the pair
+/// screening done already ([`screen_pairs`]).
+pub fn register_screened(
+    clouds: &[PointCloud],
+    config: &Config,
+    screening: &Screening,
+    observer: Option<Observer<'_>>,
+    interrupt: Interrupt,
+) -> Result<Registration> {
+    let start = Instant::now();
+    let mut config = config.clone();
+    config.validate()?;
+    config.seed = Some(config.seed.unwrap_or_else(rand::random));
+    let prepared = PreparedProblem::new_with_interrupt(clouds, &config, interrupt)?;
+    let mut result = prepared.register_screened(&config, screening, observer)?;
     result.seconds = start.elapsed().as_secs_f64();
     Ok(result)
 }

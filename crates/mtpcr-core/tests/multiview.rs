@@ -160,3 +160,64 @@ fn screening_reports_progress_and_can_be_stopped() {
     let r = register(&v.clouds, &config(3), Some(&mut stop)).unwrap();
     assert!(!r.completed);
 }
+
+#[test]
+fn a_screening_made_in_pieces_gives_the_registration_bit_for_bit() {
+    use mtpcr_core::{register_screened, screen_pairs, Interrupt, Screening};
+    let v = views_around(15, 6, 3000);
+    let c = config(5);
+    let whole = register(&v.clouds, &c, None).unwrap();
+    // The 15 pairs in three pieces, out of order, screened on one thread and on two.
+    let all: Vec<(usize, usize)> = (0..6)
+        .flat_map(|s| (s + 1..6).map(move |t| (s, t)))
+        .collect();
+    let pieces: Vec<Screening> = [&all[9..], &all[..4], &all[4..9]]
+        .iter()
+        .enumerate()
+        .map(|(k, pairs)| {
+            let c = Config {
+                num_threads: 1 + k % 2,
+                ..c.clone()
+            };
+            screen_pairs(&v.clouds, &c, Some(pairs), None, Interrupt::new()).unwrap()
+        })
+        .collect();
+    let screening = Screening::merge(pieces).unwrap();
+    let split = register_screened(&v.clouds, &c, &screening, None, Interrupt::new()).unwrap();
+    assert!(whole.unplaced.is_empty(), "{:?}", whole.unplaced);
+    assert_eq!(split.poses, whole.poses);
+    assert_eq!(split.edges, whole.edges);
+    assert_eq!(split.verdict.confident, whole.verdict.confident);
+    assert_eq!(split.evaluations, whole.evaluations);
+
+    // The screening of other clouds does not fit these.
+    let w = views_around(16, 6, 3000);
+    let other = screen_pairs(&w.clouds, &c, None, None, Interrupt::new()).unwrap();
+    let e = register_screened(&v.clouds, &c, &other, None, Interrupt::new()).unwrap_err();
+    assert!(e.to_string().contains("fingerprint differs"), "{e}");
+    // A pair outside the clouds, and a pair given twice, are refused with their names.
+    let mut bad = screening.clone();
+    bad.pairs[0].target = 6;
+    let e = register_screened(&v.clouds, &c, &bad, None, Interrupt::new()).unwrap_err();
+    assert!(
+        e.to_string().contains("is not a pair of the 6 clouds"),
+        "{e}"
+    );
+    let e = screen_pairs(
+        &v.clouds,
+        &c,
+        Some(&[(1, 2), (1, 2)]),
+        None,
+        Interrupt::new(),
+    )
+    .unwrap_err();
+    assert!(
+        e.to_string().contains("(1, 2) is listed more than once"),
+        "{e}"
+    );
+    let e = screen_pairs(&v.clouds, &c, Some(&[(2, 1)]), None, Interrupt::new()).unwrap_err();
+    assert!(e.to_string().contains("(2, 1) is not a pair"), "{e}");
+    // Three scans are a loop, not a set to screen.
+    let e = screen_pairs(&v.clouds[..3], &c, None, None, Interrupt::new()).unwrap_err();
+    assert!(e.to_string().contains("four or more scans"), "{e}");
+}
