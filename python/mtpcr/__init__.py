@@ -53,6 +53,7 @@ from ._mtpcr import (
     read_points,
     read_scans,
     register,
+    screen_pairs,
     write_ply,
 )
 
@@ -72,5 +73,6 @@ __all__ = [
     "read_points",
     "read_scans",
     "register",
+    "screen_pairs",
     "write_ply",
 ]

@@ -19,6 +19,7 @@ _Method = Literal["mtpcr", "mfea", "gmfea"]
 _Order = Literal["auto", "given"]
 _Callback = Callable[[int, dict[str, float]], bool | None]
 _Viewpoints = Literal["origin"] | Sequence[ArrayLike | None] | None
+_Screening = dict[str, Any] | Sequence[dict[str, Any]]
 
 __version__: str
 """The package version (the Cargo workspace version)."""
@@ -313,6 +314,7 @@ def register(
     on_pair_screening: Callable[[int, int], bool | None] | None = None,
     config: Config | None = None,
     viewpoints: _Viewpoints = None,
+    screening: _Screening | None = None,
     method: _Method = ...,
     order: _Order = ...,
     population_size: int = ...,
@@ -354,10 +356,61 @@ def register(
     frames, 3DMatch fragments) or one entry per cloud, each None or 3 finite numbers. Any other
     form raises ``ValueError``.
 
+    ``screening``: the pair screening of these clouds made already by :func:`screen_pairs`
+    (its dict, or a list of them for disjoint sets of pairs; four or more clouds in no known
+    order): the registration skips screening and gives exactly the result it gives screening
+    every pair itself. From other clouds or settings it raises ``ValueError``.
+
     Each cloud holds real numbers (float or int; booleans, complex numbers and strings raise
     ``ValueError``), at least ``MIN_POINTS`` finite points of magnitude at most 1e30, not
     all on one line. A planar cloud is registered with a ``UserWarning``: its rotation about
     the plane normal is weakly determined.
+    """
+
+def screen_pairs(
+    *clouds: ArrayLike,
+    pairs: Sequence[tuple[int, int]] | None = None,
+    seed: int | None = None,
+    on_pair_screening: Callable[[int, int], bool | None] | None = None,
+    config: Config | None = None,
+    viewpoints: _Viewpoints = None,
+    method: _Method = ...,
+    order: _Order = ...,
+    population_size: int = ...,
+    generations: int = ...,
+    sample_ratio: float = ...,
+    max_sample_points: int = ...,
+    sampling: _Sampling = ...,
+    p_intra: float = ...,
+    p_inter: float = ...,
+    top_ratio: float = ...,
+    scale_factor: float = ...,
+    sbx_eta_start: float = ...,
+    sbx_eta_end: float = ...,
+    alpha: float = ...,
+    aiding_cap_ratio: float = ...,
+    two_way_aiding: bool = ...,
+    unit_free_loop_term: bool = ...,
+    refresh_loop_term: bool = ...,
+    search: _Search = ...,
+    restarts: int = ...,
+    stop_when_restarts_agree: bool = ...,
+    refine_iterations: int = ...,
+    hypotheses: int = ...,
+    feature_voxel_ratio: float = ...,
+    num_threads: int = ...,
+) -> dict[str, Any]:
+    """The pair screening of four or more clouds in no known order (the slow first step of
+    ``register`` for a whole room): each pair's pose hypotheses, for the ``pairs`` given
+    (``(source, target)``, clouds numbered from 0, ``source < target``; None: every pair).
+
+    Screen disjoint sets of pairs anywhere and pass the results, as a list, to
+    ``register(*clouds, screening=...)`` with the same clouds, seed and settings: its result is
+    exactly the one ``register`` gives screening every pair itself
+    (``mtpcr.distributed.register_scene`` does this on Ray). Returns plain, picklable data: a
+    dict with ``fingerprint``, ``clouds`` (their number) and ``pairs`` (dicts with ``source``,
+    ``target``, ``poses`` (H, 4, 4, in the prepared centred frames), ``overlaps`` (H) and
+    ``supports`` (H)). Clouds and keywords as for ``register``.
     """
 
 def read_ply(path: _Path) -> NDArray[np.float64]:

@@ -64,7 +64,11 @@ def apply(t: np.ndarray, points: np.ndarray) -> np.ndarray:
     return points @ t[:3, :3].T + t[:3, 3]
 
 
-def three_views(seed: int, points_per_view: int = 20_000) -> ThreeViews:
+def three_views(
+    seed: int, points_per_view: int = 20_000, count: int = 3, step_deg: float = 45.0
+) -> ThreeViews:
+    """``count`` views of one seeded shape, ``step_deg`` apart around it, each moved by a
+    random rigid motion; ``ground_truth`` holds T_(k, k+1) around the ring."""
     rng = np.random.default_rng(seed)
 
     def directions(n: int) -> np.ndarray:
@@ -85,8 +89,8 @@ def three_views(seed: int, points_per_view: int = 20_000) -> ThreeViews:
 
     motions = []
     clouds = []
-    for i in range(3):
-        a = np.radians(45.0 * (i - 1) + rng.uniform(-5, 5))
+    for i in range(count):
+        a = np.radians(step_deg * (i - 1) + rng.uniform(-5, 5))
         e = rng.uniform(-0.3, 0.3)
         view = np.array([np.cos(a) * np.cos(e), np.sin(e), np.sin(a) * np.cos(e)])
         u = directions(4 * points_per_view)
@@ -95,7 +99,9 @@ def three_views(seed: int, points_per_view: int = 20_000) -> ThreeViews:
         motions.append(motion)
         clouds.append(apply(motion, surface(u)))
     # T_ij = M_j inv(M_i): undo view i's motion, apply view j's.
-    gt = np.stack([motions[(i + 1) % 3] @ np.linalg.inv(motions[i]) for i in range(3)])
+    gt = np.stack(
+        [motions[(i + 1) % count] @ np.linalg.inv(motions[i]) for i in range(count)]
+    )
     return ThreeViews(clouds=tuple(clouds), ground_truth=gt)
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import pickle
 import signal
 import subprocess
 import sys
@@ -14,7 +15,13 @@ import pytest
 
 import mtpcr
 
-from conftest import QUICK, SYNTHETIC_MAX_ROTATION_ERROR_DEG, apply, rotation_error_deg
+from conftest import (
+    QUICK,
+    SYNTHETIC_MAX_ROTATION_ERROR_DEG,
+    apply,
+    rotation_error_deg,
+    three_views,
+)
 
 
 def test_default_settings_recover_a_synthetic_loop(views):
@@ -353,3 +360,56 @@ def test_screening_of_clouds_in_no_known_order_reports_progress(small_views):
     assert not r.completed
     with pytest.raises(TypeError, match="on_pair_screening must be callable"):
         mtpcr.register(*clouds, on_pair_screening=3)
+
+
+def test_a_screening_made_in_pieces_gives_register_bit_for_bit():
+    clouds = three_views(seed=21, points_per_view=2000, count=6, step_deg=60.0).clouds
+    whole = mtpcr.register(*clouds, seed=3)
+    assert whole.unplaced == [] and whole.confident
+    pairs = [(s, t) for s in range(6) for t in range(s + 1, 6)]
+    seen = []
+    pieces = [
+        mtpcr.screen_pairs(*clouds, pairs=pairs[:7], seed=3),
+        mtpcr.screen_pairs(
+            *clouds, pairs=pairs[7:], seed=3, on_pair_screening=lambda d, t: seen.append((d, t))
+        ),
+    ]
+    assert seen[-1] == (8, 8)
+    assert [(p["source"], p["target"]) for p in pieces[0]["pairs"]] == pairs[:7]
+    first = pieces[0]["pairs"][0]
+    assert first["poses"].shape[1:] == (4, 4) and first["poses"].dtype == np.float64
+    assert first["overlaps"].shape == first["supports"].shape == (len(first["poses"]),)
+    # Plain data: it pickles (Ray and multiprocessing carry it).
+    pieces = pickle.loads(pickle.dumps(pieces))
+    split = mtpcr.register(*clouds, seed=3, screening=pieces)
+    assert np.array_equal(split.poses, whole.poses)
+    assert np.array_equal(split.transforms, whole.transforms)
+    assert split.confident == whole.confident and split.unplaced == whole.unplaced
+    # All pairs in one screening, as well.
+    one = mtpcr.screen_pairs(*clouds, seed=3)
+    assert len(one["pairs"]) == 15 and one["clouds"] == 6
+    assert np.array_equal(mtpcr.register(*clouds, seed=3, screening=one).poses, whole.poses)
+
+
+def test_a_screening_that_does_not_fit_is_refused_with_the_reason():
+    clouds = three_views(seed=22, points_per_view=1500, count=5, step_deg=70.0).clouds
+    screening = mtpcr.screen_pairs(*clouds, seed=1, pairs=[(0, 1), (1, 2)])
+    other = three_views(seed=23, points_per_view=1500, count=5, step_deg=70.0).clouds
+    with pytest.raises(ValueError, match="fingerprint differs"):
+        mtpcr.register(*other, seed=1, screening=screening)
+    with pytest.raises(ValueError, match=r"\(0, 1\) is screened more than once"):
+        mtpcr.register(*clouds, seed=1, screening=[screening, screening])
+    with pytest.raises(TypeError, match="screening must be the dict"):
+        mtpcr.register(*clouds, seed=1, screening=3)
+    broken = {**screening, "pairs": [{**screening["pairs"][0], "poses": np.zeros((2, 3, 3))}]}
+    with pytest.raises(ValueError, match=r"pair 0: `poses` must have shape \(H, 4, 4\)"):
+        mtpcr.register(*clouds, seed=1, screening=broken)
+    with pytest.raises(ValueError, match="has no `supports`"):
+        pair = {k: v for k, v in screening["pairs"][0].items() if k != "supports"}
+        mtpcr.register(*clouds, seed=1, screening={**screening, "pairs": [pair]})
+    with pytest.raises(ValueError, match=r"\(3, 1\) is not a pair"):
+        mtpcr.screen_pairs(*clouds, pairs=[(3, 1)])
+    with pytest.raises(ValueError, match="pairs must be a sequence"):
+        mtpcr.screen_pairs(*clouds, pairs=[(0, 1, 2)])
+    with pytest.raises(ValueError, match="four or more scans"):
+        mtpcr.screen_pairs(*clouds[:3])

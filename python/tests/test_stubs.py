@@ -101,9 +101,14 @@ def test_config_and_register_keywords_are_the_config_fields(stub):
         "on_pair_screening",
         "config",
         "viewpoints",
+        "screening",
     }
     assert sorted(set(keywords) ^ expected) == [], "register keywords vs Config fields"
     assert len(keywords) == len(set(keywords))
+    positional, keywords = stub_params(stub["screen_pairs"])
+    assert positional == [] and stub["screen_pairs"].args.vararg.arg == "clouds"
+    expected = (expected - {"on_generation", "screening"}) | {"pairs"}
+    assert sorted(set(keywords) ^ expected) == [], "screen_pairs keywords vs Config fields"
 
 
 def test_config_property_docs_are_the_rust_field_docs(stub):

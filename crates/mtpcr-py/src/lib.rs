@@ -17,6 +17,7 @@ mod errors;
 mod evaluate;
 mod files;
 mod run;
+mod screen;
 
 use pyo3::prelude::*;
 use pyo3::types::PyTuple;
@@ -42,6 +43,7 @@ fn _mtpcr(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<run::PyRegistration>()?;
     m.add_class::<files::PyProblem>()?;
     m.add_function(wrap_pyfunction!(run::register, m)?)?;
+    m.add_function(wrap_pyfunction!(screen::screen_pairs, m)?)?;
     m.add_function(wrap_pyfunction!(files::read_ply, m)?)?;
     m.add_function(wrap_pyfunction!(files::read_points, m)?)?;
     m.add_function(wrap_pyfunction!(files::read_scans, m)?)?;

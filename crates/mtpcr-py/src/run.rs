@@ -6,7 +6,8 @@ use crate::convert::{
     viewpoints_from_py,
 };
 use crate::errors::to_py;
-use mtpcr_core::{Config, Interrupt, Progress, Registration, Stage};
+use crate::screen::screening_from_py;
+use mtpcr_core::{Config, Interrupt, Observer, Progress, Registration, Stage};
 use std::sync::Mutex;
 
 /// How often the waiting thread checks for Ctrl-C.
@@ -62,13 +63,13 @@ fn call_observer(
 }
 
 /// The user's progress callbacks.
-struct Callbacks {
-    generation: Option<Py<PyAny>>,
-    pair_screening: Option<Py<PyAny>>,
+pub(crate) struct Callbacks {
+    pub(crate) generation: Option<Py<PyAny>>,
+    pub(crate) pair_screening: Option<Py<PyAny>>,
 }
 
 /// `f` when it is callable (`None` when absent), else a `TypeError` naming the argument.
-fn callable(f: Option<&Bound<'_, PyAny>>, name: &str) -> PyResult<Option<Py<PyAny>>> {
+pub(crate) fn callable(f: Option<&Bound<'_, PyAny>>, name: &str) -> PyResult<Option<Py<PyAny>>> {
     match f {
         Some(f) if !f.is_none() => {
             if !f.is_callable() {
@@ -123,10 +124,16 @@ fn callable(f: Option<&Bound<'_, PyAny>>, name: &str) -> PyResult<Option<Py<PyAn
 /// the slow part of a whole room); returning ``False`` stops the screening (the pairs not
 /// screened are not used, the result has ``completed=False``).
 ///
+/// ``screening``: the pair screening of these clouds made already by :func:`screen_pairs`
+/// (one result, or a list of results for disjoint sets of pairs; four or more clouds in no
+/// known order): the registration skips screening and gives exactly the result it would
+/// have given screening every pair itself. It must come from the same clouds and settings
+/// (a ``ValueError`` says when it does not).
+///
 /// The GIL is released while the engine runs. Bad clouds or settings raise ``ValueError``
 /// naming the argument or setting; an unknown keyword raises ``TypeError``.
 #[pyfunction]
-#[pyo3(signature = (*clouds, seed=None, on_generation=None, on_pair_screening=None, config=None, viewpoints=None, **settings))]
+#[pyo3(signature = (*clouds, seed=None, on_generation=None, on_pair_screening=None, config=None, viewpoints=None, screening=None, **settings))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn register(
     py: Python<'_>,
@@ -136,6 +143,7 @@ pub(crate) fn register(
     on_pair_screening: Option<&Bound<'_, PyAny>>,
     config: Option<&Bound<'_, PyAny>>,
     viewpoints: Option<&Bound<'_, PyAny>>,
+    screening: Option<&Bound<'_, PyAny>>,
     settings: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<PyRegistration> {
     let base = base_config(config)?;
@@ -157,8 +165,38 @@ pub(crate) fn register(
             clouds.len()
         )));
     }
+    let clouds = clouds_from_py(clouds, viewpoints)?;
+    let screening = screening.map(screening_from_py).transpose()?;
+    let names = mtpcr_core::ViewGraph::for_views(clouds.len())
+        .map_err(to_py)?
+        .task_names();
+    let inner = run_engine(
+        py,
+        &callbacks,
+        &names,
+        |observer, interrupt| match &screening {
+            Some(screening) => {
+                mtpcr_core::register_screened(&clouds, &config, screening, observer, interrupt)
+            }
+            None => mtpcr_core::register_interruptible(&clouds, &config, observer, interrupt),
+        },
+    )?;
+    let mut used = config;
+    used.seed = Some(inner.seed);
+    Ok(PyRegistration {
+        inner,
+        config: used,
+    })
+}
+
+/// The clouds of `register(*clouds, viewpoints=...)` (or `screen_pairs`), each with its
+/// viewpoint.
+pub(crate) fn clouds_from_py(
+    clouds: &Bound<'_, PyTuple>,
+    viewpoints: Option<&Bound<'_, PyAny>>,
+) -> PyResult<Vec<mtpcr_core::PointCloud>> {
     let viewpoints = viewpoints_from_py(viewpoints, clouds.len())?;
-    let clouds: Vec<_> = clouds
+    clouds
         .iter()
         .zip(viewpoints)
         .enumerate()
@@ -169,15 +207,20 @@ pub(crate) fn register(
                 None => cloud,
             })
         })
-        .collect::<PyResult<_>>()?;
-    let names = mtpcr_core::ViewGraph::for_views(clouds.len())
-        .map_err(to_py)?
-        .task_names();
+        .collect()
+}
 
-    // The engine runs on a worker thread without the GIL; its observer takes the GIL once
-    // per generation to call the user's callback. This thread waits, checking for Ctrl-C
-    // every 50 ms: a KeyboardInterrupt sets the engine's interrupt flag (it stops within
-    // a step: sampling, a generation, a refinement iteration) and is raised once it has.
+/// Runs `work` (the engine) on a worker thread without the GIL; its observer takes the GIL
+/// once per report to call the user's callbacks. This thread waits, checking for Ctrl-C
+/// every 50 ms: a KeyboardInterrupt sets the engine's interrupt flag (it stops within a
+/// step: sampling, a generation, a refinement iteration, a batch of pairs) and is raised
+/// once it has.
+pub(crate) fn run_engine<T: Send>(
+    py: Python<'_>,
+    callbacks: &Callbacks,
+    names: &[String],
+    work: impl FnOnce(Option<Observer<'_>>, Interrupt) -> mtpcr_core::Result<T> + Send,
+) -> PyResult<T> {
     let failure: Mutex<Option<PyErr>> = Mutex::new(None);
     let interrupt = Interrupt::new();
     let outcome = std::thread::scope(|scope| {
@@ -186,7 +229,7 @@ pub(crate) fn register(
                 if callbacks.generation.is_none() && callbacks.pair_screening.is_none() {
                     return ControlFlow::Continue(());
                 }
-                Python::attach(|py| match call_observer(py, &callbacks, &names, progress) {
+                Python::attach(|py| match call_observer(py, callbacks, names, progress) {
                     Ok(true) => ControlFlow::Continue(()),
                     Ok(false) => ControlFlow::Break(()),
                     Err(e) => {
@@ -197,12 +240,7 @@ pub(crate) fn register(
                     }
                 })
             };
-            mtpcr_core::register_interruptible(
-                &clouds,
-                &config,
-                Some(&mut observer),
-                interrupt.clone(),
-            )
+            work(Some(&mut observer), interrupt.clone())
         });
         while !py.detach(|| {
             let start = std::time::Instant::now();
@@ -226,13 +264,7 @@ pub(crate) fn register(
     py.check_signals()?;
     let outcome =
         outcome.map_err(|_| PyRuntimeError::new_err("the registration thread panicked"))?;
-    let inner = outcome.map_err(to_py)?;
-    let mut used = config;
-    used.seed = Some(inner.seed);
-    Ok(PyRegistration {
-        inner,
-        config: used,
-    })
+    outcome.map_err(to_py)
 }
 
 /// The result of :func:`register`. Read-only.
