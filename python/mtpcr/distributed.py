@@ -6,8 +6,10 @@ then ``address="auto"`` here on the head, or ``RAY_ADDRESS``). mtpcr (with the s
 must be installed on every node; data files need not be shared: clouds and scans go through
 Ray's object store, each put there once and passed to the tasks by reference.
 
-Two entry points:
+Three entry points:
 
+- :func:`register_scene`: one whole scene (the fragments of a room), its pair screening
+  spread over the cluster; exactly the poses of a local ``mtpcr.register``.
 - :func:`register_batch`: many registrations (a scanning line, a sweep of settings). Each item
   is a scan set (a sequence of (N, 3) arrays or objects with ``.points``), a problem file, or
   an :class:`Item` with its own seed and settings. Results come back in the items' order as
@@ -59,6 +61,8 @@ __all__ = [
     "main",
     "read_results",
     "register_batch",
+    "register_scene",
+    "SceneError",
 ]
 
 PathType = Union[str, "os.PathLike[str]"]
@@ -629,6 +633,148 @@ def register_batch(
     finally:
         appender.close()
     return out  # type: ignore[return-value]
+
+
+# --------------------------------------------------------------------------------------------
+# register_scene
+
+
+class SceneError(RuntimeError):
+    """A screening task of :func:`register_scene` failed (its :class:`Failure` is
+    ``failure``); nothing was registered."""
+
+    def __init__(self, failure: Failure):
+        super().__init__(f"a pair screening task failed: {failure.error}: {failure.message}")
+        self.failure = failure
+
+
+def _screen_task(
+    index: int,
+    pairs: list[tuple[int, int]],
+    settings: dict,
+    viewpoints: Any,
+    num_threads: int,
+    *clouds: np.ndarray,
+) -> dict | Failure:
+    """A Ray task: the screening of some pairs of a scene, plain data (never raises)."""
+    start = time.perf_counter()
+    try:
+        screening = mtpcr.screen_pairs(
+            *clouds,
+            pairs=pairs,
+            viewpoints=viewpoints,
+            **{**settings, "num_threads": num_threads},
+        )
+    except Exception as e:
+        return Failure.of(
+            e,
+            index=index,
+            key=f"screening-{index}",
+            name=None,
+            seed=settings.get("seed"),
+            node=_node(),
+        )
+    screening["node"] = _node()
+    screening["task_seconds"] = time.perf_counter() - start
+    return screening
+
+
+def register_scene(
+    clouds: Sequence[Any],
+    *,
+    seed: int | None = None,
+    config: Any = None,
+    viewpoints: Any = None,
+    tasks: int | None = None,
+    num_threads: int = 1,
+    on_task: Callable[[dict], Any] | None = None,
+    progress: bool = True,
+    address: str | None = None,
+) -> mtpcr.Registration:
+    """Registers the scans of a whole scene (four or more, in no known order: the fragments of
+    a room) with the pair screening, most of the time of a room, spread over Ray.
+
+    The pairs are dealt round-robin to ``tasks`` Ray tasks (default: as many as the cluster
+    has CPUs for tasks of ``num_threads`` threads, spread over its nodes); each prepares the
+    clouds and screens its pairs (:func:`mtpcr.screen_pairs`); this process then registers
+    with their screenings (``mtpcr.register(*clouds, screening=...)``). The result is exactly
+    ``mtpcr.register(*clouds, seed=seed, config=config, viewpoints=viewpoints)``'s, bit for
+    bit, whatever the cluster. ``seed``: drawn when None and reported as
+    ``Registration.seed``. ``config``: an :class:`mtpcr.Config` or a dict of its fields (its
+    ``num_threads`` is used for the final registration here). ``on_task(info)`` is called as
+    each task's screening arrives (``info``: ``task``, ``tasks``, ``pairs`` screened so far,
+    ``total`` pairs, ``node``, ``seconds``); ``progress`` prints the same to stderr.
+    ``address`` as for :func:`register_batch`.
+
+    Each task prepares every cloud (the screening depends on all of them), which costs a few
+    seconds a task on a room: more tasks balance the load better but repeat that work.
+    Raises :class:`SceneError` when a task fails, ``ValueError`` for bad clouds or settings.
+    """
+    if not isinstance(num_threads, int) or num_threads < 1:
+        raise ValueError(f"num_threads must be an integer of at least 1, got {num_threads!r}")
+    if tasks is not None and (not isinstance(tasks, int) or tasks < 1):
+        raise ValueError(f"tasks must be None or an integer of at least 1, got {tasks!r}")
+    arrays = [_points(c) for c in clouds]
+    if len(arrays) < 4:
+        raise ValueError(
+            f"register_scene is for four or more scans in no known order, got {len(arrays)} "
+            "(use mtpcr.register)"
+        )
+    settings = _settings_of(config)
+    if seed is None:
+        seed = settings.get("seed")
+    if seed is None:
+        seed = int.from_bytes(os.urandom(8), "little")
+    settings["seed"] = seed
+    final_threads = settings.pop("num_threads", None)
+    if settings.get("order", "auto") != "auto":
+        raise ValueError('register_scene needs order "auto" (scans in no known order)')
+    mtpcr.Config(**settings)  # bad settings fail here, before any task starts
+    n = len(arrays)
+    pairs = [(s, t) for s in range(n) for t in range(s + 1, n)]
+
+    ray = _connect(address)
+    if tasks is None:
+        cpus = int(ray.cluster_resources().get("CPU", 1))
+        tasks = max(1, cpus // num_threads)
+    tasks = min(tasks, len(pairs))
+    task = _remote("_screen_task").options(num_cpus=num_threads, scheduling_strategy="SPREAD")
+    refs = [ray.put(a) for a in arrays]
+    pending = {}
+    for k in range(tasks):
+        chunk = pairs[k::tasks]
+        ref = task.remote(k, chunk, settings, viewpoints, num_threads, *refs)
+        pending[ref] = (k, len(chunk))
+    parts: list[dict | None] = [None] * tasks
+    bar = _Progress(tasks, progress, "register_scene")
+    bar.note(f"{n} scans, {len(pairs)} pairs screened in {tasks} tasks")
+    screened = 0
+
+    def arrived(tag, value):
+        nonlocal screened
+        k, count = tag
+        if isinstance(value, BaseException):
+            value = Failure.of(value, index=k, key=f"screening-{k}", name=None, seed=seed)
+        if isinstance(value, Failure):
+            raise SceneError(value)
+        parts[k] = value
+        screened += count
+        info = {
+            "task": k,
+            "tasks": tasks,
+            "pairs": screened,
+            "total": len(pairs),
+            "node": value["node"],
+            "seconds": value["task_seconds"],
+        }
+        bar.step(f"{screened}/{len(pairs)} pairs, {info['seconds']:.1f} s on {info['node']}")
+        if on_task is not None:
+            on_task(info)
+
+    _drain(ray, pending, arrived)
+    if final_threads is not None:
+        settings["num_threads"] = final_threads
+    return mtpcr.register(*arrays, viewpoints=viewpoints, screening=parts, **settings)
 
 
 # --------------------------------------------------------------------------------------------

@@ -99,9 +99,7 @@ def three_views(
         motions.append(motion)
         clouds.append(apply(motion, surface(u)))
     # T_ij = M_j inv(M_i): undo view i's motion, apply view j's.
-    gt = np.stack(
-        [motions[(i + 1) % count] @ np.linalg.inv(motions[i]) for i in range(count)]
-    )
+    gt = np.stack([motions[(i + 1) % count] @ np.linalg.inv(motions[i]) for i in range(count)])
     return ThreeViews(clouds=tuple(clouds), ground_truth=gt)
 
 
