@@ -555,13 +555,24 @@ pub fn register_interruptible(
     interrupt: Interrupt,
 ) -> Result<Registration> {
     let start = Instant::now();
+    let (config, prepared) = prepare_seeded(clouds, config, interrupt)?;
+    let mut result = prepared.register(&config, observer)?;
+    result.seconds = start.elapsed().as_secs_f64();
+    Ok(result)
+}
+
+/// `config`, checked, with a seed drawn when it has none (reported in the result), and the
+/// clouds prepared with it.
+fn prepare_seeded(
+    clouds: &[PointCloud],
+    config: &Config,
+    interrupt: Interrupt,
+) -> Result<(Config, PreparedProblem)> {
     let mut config = config.clone();
     config.validate()?;
     config.seed = Some(config.seed.unwrap_or_else(rand::random));
     let prepared = PreparedProblem::new_with_interrupt(clouds, &config, interrupt)?;
-    let mut result = prepared.register(&config, observer)?;
-    result.seconds = start.elapsed().as_secs_f64();
-    Ok(result)
+    Ok((config, prepared))
 }
 
 /// The pair screening of four or more scans in no known order (`config.order` auto), the
@@ -591,10 +602,7 @@ pub fn register_screened(
     interrupt: Interrupt,
 ) -> Result<Registration> {
     let start = Instant::now();
-    let mut config = config.clone();
-    config.validate()?;
-    config.seed = Some(config.seed.unwrap_or_else(rand::random));
-    let prepared = PreparedProblem::new_with_interrupt(clouds, &config, interrupt)?;
+    let (config, prepared) = prepare_seeded(clouds, config, interrupt)?;
     let mut result = prepared.register_screened(&config, screening, observer)?;
     result.seconds = start.elapsed().as_secs_f64();
     Ok(result)

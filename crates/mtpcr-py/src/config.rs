@@ -53,6 +53,22 @@ pub(crate) fn apply_settings(
     })
 }
 
+/// The settings of a call like `register(*clouds, seed=..., config=..., **settings)`: the
+/// keywords over `config` (default `Config()`), and `seed` when given and not `None`.
+pub(crate) fn call_config(
+    config: Option<&Bound<'_, PyAny>>,
+    settings: Option<&Bound<'_, PyDict>>,
+    seed: Option<&Bound<'_, PyAny>>,
+    context: &str,
+) -> PyResult<Config> {
+    let base = base_config(config)?;
+    let mut pairs = kwargs_pairs(settings)?;
+    if let Some(seed) = seed.filter(|s| !s.is_none()) {
+        pairs.push(("seed".to_string(), seed.clone()));
+    }
+    apply_settings(&base, &pairs, context)
+}
+
 /// The `config` argument of a function: an `mtpcr.Config`, or `None` (or absent) for
 /// `Config()`; anything else is a `TypeError`.
 pub(crate) fn base_config(config: Option<&Bound<'_, PyAny>>) -> PyResult<Config> {

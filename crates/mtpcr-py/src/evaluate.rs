@@ -2,7 +2,7 @@
 //! from Python, record for record; `evaluate_pairs()`: the pair benchmarks of `mtpcr eval
 //! FOLDER` (`mtpcr_core::eval::pairs`); and `find_shared_dir()`.
 
-use crate::config::{apply_settings, base_config, kwargs_pairs};
+use crate::config::call_config;
 use crate::convert::json_text_to_py;
 use crate::errors::to_py;
 use mtpcr_core::eval::pairs::{run_benchmark, summarize, PairBenchmark, PairStep};
@@ -163,8 +163,7 @@ pub(crate) fn evaluate_pairs<'py>(
     on_pair: Option<Bound<'py, PyAny>>,
     settings: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let base = base_config(config)?;
-    let mut config = apply_settings(&base, &kwargs_pairs(settings)?, "evaluate_pairs")?;
+    let mut config = call_config(config, settings, None, "evaluate_pairs")?;
     let on_pair: Option<Py<PyAny>> = match on_pair {
         Some(f) if !f.is_none() => {
             if !f.is_callable() {

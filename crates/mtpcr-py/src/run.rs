@@ -1,6 +1,6 @@
 //! `register()` and its result class.
 
-use crate::config::{apply_settings, base_config, config_to_dict, kwargs_pairs};
+use crate::config::{call_config, config_to_dict};
 use crate::convert::{
     cloud_from_py, points_from_py, points_to_py, transform_to_py, transforms_to_py,
     viewpoints_from_py,
@@ -146,14 +146,7 @@ pub(crate) fn register(
     screening: Option<&Bound<'_, PyAny>>,
     settings: Option<&Bound<'_, PyDict>>,
 ) -> PyResult<PyRegistration> {
-    let base = base_config(config)?;
-    let mut pairs = kwargs_pairs(settings)?;
-    if let Some(seed) = seed {
-        if !seed.is_none() {
-            pairs.push(("seed".to_string(), seed.clone()));
-        }
-    }
-    let config = apply_settings(&base, &pairs, "register")?;
+    let config = call_config(config, settings, seed, "register")?;
     let callbacks = Callbacks {
         generation: callable(on_generation, "on_generation")?,
         pair_screening: callable(on_pair_screening, "on_pair_screening")?,

@@ -1,7 +1,7 @@
 //! `screen_pairs()` and the screening as plain Python data (dicts, ints and numpy arrays: it
 //! pickles, so Ray and multiprocessing carry it).
 
-use crate::config::{apply_settings, base_config, kwargs_pairs};
+use crate::config::call_config;
 use crate::convert::transforms_to_py;
 use crate::run::{callable, clouds_from_py, run_engine, Callbacks};
 use mtpcr_core::{ScreenedPair, Screening, Transform};
@@ -27,6 +27,7 @@ use pyo3::types::{PyDict, PyList, PyTuple};
 /// keywords as for :func:`register`; ``on_pair_screening(screened, total)`` as there.
 #[pyfunction]
 #[pyo3(signature = (*clouds, pairs=None, seed=None, on_pair_screening=None, config=None, viewpoints=None, **settings))]
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn screen_pairs<'py>(
     py: Python<'py>,
     clouds: &Bound<'py, PyTuple>,
@@ -37,12 +38,7 @@ pub(crate) fn screen_pairs<'py>(
     viewpoints: Option<&Bound<'py, PyAny>>,
     settings: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let base = base_config(config)?;
-    let mut given = kwargs_pairs(settings)?;
-    if let Some(seed) = seed.filter(|s| !s.is_none()) {
-        given.push(("seed".to_string(), seed.clone()));
-    }
-    let config = apply_settings(&base, &given, "screen_pairs")?;
+    let config = call_config(config, settings, seed, "screen_pairs")?;
     let callbacks = Callbacks {
         generation: None,
         pair_screening: callable(on_pair_screening, "on_pair_screening")?,
@@ -181,7 +177,7 @@ fn one_from_py(obj: &Bound<'_, PyAny>) -> PyResult<Screening> {
             target,
             poses: poses
                 .chunks_exact(16)
-                .map(|m| Transform::from_row_slice(m))
+                .map(Transform::from_row_slice)
                 .collect(),
             overlaps,
             supports,
