@@ -242,8 +242,9 @@ class Registration:
         each other; every cloud placed)."""
     @property
     def verdict(self) -> dict[str, Any]:
-        """``confident``, ``reasons`` and per pair ``overlap``, ``residual`` and
-        ``self_residual``."""
+        """``confident``, ``reasons`` and per pair ``overlap``, ``residual``,
+        ``self_residual``, ``constraint`` (how firmly the overlap holds the pose against a
+        slide), ``support``, ``rival_support`` and ``free_space`` (None when not measured)."""
     @property
     def unplaced(self) -> list[dict[str, Any]]:
         """Clouds that could not be placed: dicts with ``cloud`` (from 0) and ``reason``."""
@@ -467,10 +468,11 @@ def evaluate_pairs(
     Returns ``{"benchmark": name, "records": [...], "summary": {...}}``: one record per pair
     in the benchmark's order (the lines of ``mtpcr eval --records``: ``benchmark``, ``pair``
     (``scene/target-source``), ``seed``, ``moved``, ``re_deg``, ``te``, ``registered``,
-    ``confident``, ``reasons``, ``overlap``, ``residual``, ``support``, ``rival_support``,
-    ``free_space``, ``seconds``, ``t_target_source``) and their summary (``pairs``, ``registered``,
-    ``recall`` in percent, ``re_deg`` and ``te`` over the registered pairs or None,
-    ``median_seconds``, ``failed``, ``failed_confident``, ``registered_doubted``).
+    ``confident``, ``reasons``, ``overlap``, ``residual``, ``constraint``, ``support``,
+    ``rival_support``, ``free_space``, ``seconds``, ``t_target_source``) and their summary
+    (``pairs``, ``registered``, ``recall`` in percent, ``re_deg`` and ``te`` over the
+    registered pairs or None, ``median_seconds``, ``failed``, ``failed_confident``,
+    ``registered_doubted``).
 
     ``pairs``: a seeded sample of that many pairs (default all); ``scenes``: only scenes
     whose name contains one of these; ``seed`` (default: the config's, else 0) seeds the

@@ -29,6 +29,7 @@ RECORD_FIELDS = {
     "reasons",
     "overlap",
     "residual",
+    "constraint",
     "support",
     "rival_support",
     "free_space",

@@ -200,6 +200,8 @@ fn finish(
                 free_space: c
                     .free_space
                     .map(|f| if f <= HYPOTHESIS_FREE_SPACE { 0.0 } else { f }),
+                // A slide is the verdict's doubt, not a reason to drop a room's pair.
+                constraint: None,
                 ..c.clone()
             })
             .collect();

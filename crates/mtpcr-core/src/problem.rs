@@ -12,7 +12,7 @@ use crate::interrupt::Interrupt;
 use crate::loss::{CappedDistanceLoss, InlierLoss, Loss};
 use crate::refine::RefineCloud;
 use crate::se3::{translation, Rigid, Transform};
-use crate::search::{IndexedCloud, SearchMethod};
+use crate::search::{IndexedCloud, NearestGrid, SearchMethod};
 use crate::verdict::{check_edge, EdgeCheck, HYPOTHESIS_FREE_SPACE, SEARCH_FREE_SPACE};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -50,6 +50,12 @@ pub struct PreparedProblem {
     interrupt: Interrupt,
     seconds: f64,
 }
+
+/// Keypoints of two scans meet (for [`PreparedProblem::slide_constraint`]) within this many
+/// keypoint voxels...
+const SLIDE_RADIUS_VOXELS: f64 = 1.5;
+/// ...and the constraint is measured only where at least this many meet.
+const SLIDE_MIN_MATCHES: usize = 10;
 
 impl PreparedProblem {
     /// Prepares clouds as `config.order` says: two clouds are one pair, three (or more in
@@ -444,8 +450,45 @@ impl PreparedProblem {
     pub(crate) fn check_edge(&self, edge: Edge, t: &Rigid) -> EdgeCheck {
         EdgeCheck {
             free_space: self.free_space_violation(edge.source, edge.target, t),
+            constraint: self.slide_constraint(edge.source, edge.target, t),
             ..check_edge(&self.full, edge, t, self.eps)
         }
+    }
+
+    /// [`EdgeCheck::constraint`] of cloud `s` -> cloud `d` at `t` (centred frames): keypoints
+    /// meet where one lies within [`SLIDE_RADIUS_VOXELS`] keypoint voxels of the other's
+    /// nearest; `None` without features or with fewer than [`SLIDE_MIN_MATCHES`] meeting.
+    pub(crate) fn slide_constraint(&self, s: usize, d: usize, t: &Rigid) -> Option<f64> {
+        let (config, features) = self.features.as_ref()?;
+        let radius = SLIDE_RADIUS_VOXELS * config.voxel;
+        // Normals in d's frame, of both directions' meeting keypoints.
+        let mut scatter = nalgebra::Matrix3::<f64>::zeros();
+        let mut count = 0usize;
+        let r_sd = nalgebra::Matrix3::from_fn(|i, j| t.r[i][j]);
+        for (from, to, pose, rotate) in [(s, d, *t, false), (d, s, t.inverse(), true)] {
+            let (a, b) = (&features[from], &features[to]);
+            let grid = NearestGrid::new(&b.points, radius);
+            for p in &a.points {
+                let Some((m, d2)) = grid.nearest(&pose.apply(p)).hit else {
+                    continue;
+                };
+                if d2 > radius * radius {
+                    continue;
+                }
+                let mut n = nalgebra::Vector3::from(b.normals[m]);
+                if rotate {
+                    n = r_sd * n;
+                }
+                scatter += n * n.transpose();
+                count += 1;
+            }
+        }
+        (count >= SLIDE_MIN_MATCHES).then(|| {
+            (scatter / count as f64)
+                .symmetric_eigenvalues()
+                .min()
+                .max(0.0)
+        })
     }
 
     /// The `poses` (cloud `s` -> cloud `d`, centred frames) that put no surface where a
@@ -508,4 +551,40 @@ pub(crate) fn thread_pool(num_threads: usize) -> Result<rayon::ThreadPool> {
         .num_threads(num_threads)
         .build()
         .map_err(|e| Error::InvalidInput(format!("cannot start {num_threads} threads: {e}")))
+}
+
+#[cfg(test)]
+mod slide_tests {
+    use super::*;
+
+    /// A floor and a back wall (they meet along x: nothing holds a slide along it), and
+    /// optionally a side wall that does.
+    fn room(side_wall: bool) -> PointCloud {
+        let mut points = crate::freespace::tests::corner();
+        if side_wall {
+            for j in 0..=80 {
+                for k in 0..=80 {
+                    points.push([-1.0, -1.0 + j as f64 * 0.025, 1.0 + k as f64 * 0.025]);
+                }
+            }
+        }
+        PointCloud::new(points)
+    }
+
+    fn constraint(side_wall: bool) -> f64 {
+        let clouds = [room(side_wall), room(side_wall)];
+        let prepared = PreparedProblem::new(&clouds, &Config::default()).unwrap();
+        prepared
+            .slide_constraint(0, 1, &Rigid::from_matrix(&Transform::identity()))
+            .expect("keypoints meet")
+    }
+
+    #[test]
+    fn two_planes_do_not_hold_a_slide_along_their_line_and_three_do() {
+        let two = constraint(false);
+        let three = constraint(true);
+        assert!(two < 0.005, "floor and one wall: {two}");
+        assert!(three > 0.1, "floor and two walls: {three}");
+        assert!(three > crate::verdict::MIN_CONSTRAINT && two < crate::verdict::MIN_CONSTRAINT);
+    }
 }

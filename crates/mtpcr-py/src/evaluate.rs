@@ -127,8 +127,8 @@ pub(crate) fn evaluate<'py>(
 /// Returns ``{"benchmark": name, "records": [...], "summary": {...}}``: one record per pair
 /// in the benchmark's order (the fields of the CLI's ``--records`` lines: ``benchmark``,
 /// ``pair`` (``scene/target-source``), ``seed``, ``moved``, ``re_deg``, ``te``,
-/// ``registered``, ``confident``, ``reasons``, ``overlap``, ``residual``, ``support``,
-/// ``rival_support``, ``free_space``, ``seconds``, ``t_target_source`` (4x4 rows)), and
+/// ``registered``, ``confident``, ``reasons``, ``overlap``, ``residual``, ``constraint``,
+/// ``support``, ``rival_support``, ``free_space``, ``seconds``, ``t_target_source`` (4x4 rows)), and
 /// their summary:
 /// ``pairs``, ``registered``, ``recall`` (percent), ``re_deg`` and ``te`` (means over the
 /// registered pairs, ``None`` when there are none), ``median_seconds``, ``failed``,

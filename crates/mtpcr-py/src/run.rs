@@ -428,7 +428,9 @@ impl PyRegistration {
     /// confident) and ``edges`` (per pair: ``source``, ``target``, ``overlap``: fraction of
     /// points within eps of the other cloud, ``residual``: their median distance to its
     /// surface, relative to eps, ``self_residual``: the same for the two scans against
-    /// themselves, the larger; what a perfect fit would leave).
+    /// themselves, the larger; what a perfect fit would leave; ``constraint``: how firmly the
+    /// overlapping surfaces hold the pose against a slide, ``support``, ``rival_support``
+    /// and ``free_space``, each None when not measured).
     #[getter]
     fn verdict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
         let text = serde_json::to_string(&self.inner.verdict)

@@ -261,6 +261,10 @@ pub struct PairRecord {
     /// The verdict's residual of the pair, relative to eps.
     #[serde(default)]
     pub residual: f64,
+    /// How firmly the overlap holds the pose against a slide
+    /// ([`crate::verdict::EdgeCheck::constraint`]).
+    #[serde(default)]
+    pub constraint: Option<f64>,
     /// Feature matches the estimate explains.
     #[serde(default)]
     pub support: Option<usize>,
@@ -333,6 +337,7 @@ pub fn run_pair(
         reasons: result.verdict.reasons.clone(),
         overlap: check.map_or(0.0, |c| c.overlap),
         residual: check.map_or(0.0, |c| c.residual),
+        constraint: check.and_then(|c| c.constraint),
         support: check.and_then(|c| c.support),
         rival_support: check.and_then(|c| c.rival_support),
         free_space: check.and_then(|c| c.free_space),
@@ -526,6 +531,7 @@ mod tests {
             reasons: Vec::new(),
             overlap: 0.5,
             residual: 0.1,
+            constraint: None,
             support: Some(40),
             rival_support: Some(5),
             free_space: Some(0.01),
@@ -558,6 +564,7 @@ mod tests {
             reasons: Vec::new(),
             overlap: 0.5,
             residual: 0.1,
+            constraint: None,
             support: None,
             rival_support: None,
             free_space: None,
