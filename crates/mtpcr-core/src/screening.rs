@@ -30,7 +30,7 @@ pub struct ScreenedPair {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Screening {
     /// Identifies the preparation (clouds, sampling, features) and the hypothesis count the
-    /// poses belong to ([`fingerprint`]).
+    /// poses belong to (a hash of the prepared clouds and the hypothesis count).
     pub fingerprint: u64,
     /// Screened pairs, each at most once; a pair not listed has no hypotheses.
     pub pairs: Vec<ScreenedPair>,
