@@ -411,7 +411,8 @@ def screen_pairs(
     (``mtpcr.distributed.register_scene`` does this on Ray). Returns plain, picklable data: a
     dict with ``fingerprint``, ``clouds`` (their number) and ``pairs`` (dicts with ``source``,
     ``target``, ``poses`` (H, 4, 4, in the prepared centred frames), ``overlaps`` (H) and
-    ``supports`` (H)). Clouds and keywords as for ``register``.
+    ``supports`` (H)). Clouds and keywords as for ``register``; the return value of
+    ``on_pair_screening`` is ignored (a screening is all or nothing).
     """
 
 def read_ply(path: _Path) -> NDArray[np.float64]:

@@ -375,6 +375,11 @@ def test_a_screening_made_in_pieces_gives_register_bit_for_bit():
         ),
     ]
     assert seen[-1] == (8, 8)
+    # A screening is all or nothing: a callback's False does not cut it short.
+    stopped = mtpcr.screen_pairs(
+        *clouds, pairs=pairs[7:], seed=3, on_pair_screening=lambda d, t: False
+    )
+    assert len(stopped["pairs"]) == 8
     assert [(p["source"], p["target"]) for p in pieces[0]["pairs"]] == pairs[:7]
     first = pieces[0]["pairs"][0]
     assert first["poses"].shape[1:] == (4, 4) and first["poses"].dtype == np.float64

@@ -666,7 +666,8 @@ impl PreparedProblem {
     /// [`PreparedProblem::register`] does first): the hypotheses of the given pairs (scans
     /// numbered from 0; `None`: every pair), to be handed to
     /// [`PreparedProblem::register_screened`] of the same clouds and settings, alone or
-    /// merged with the screenings of the other pairs ([`Screening::merge`]).
+    /// merged with the screenings of the other pairs ([`Screening::merge`]). Fails with
+    /// [`Error::Interrupted`] when the observer stops it.
     pub fn screen_pairs(
         &self,
         config: &Config,
@@ -694,8 +695,12 @@ impl PreparedProblem {
                 .collect::<Result<_>>()?,
         };
         let pool = crate::problem::thread_pool(config.num_threads)?;
-        let (screened, _) = screen(self, &edges, config.hypotheses, &pool, observer)?;
+        let (screened, completed) = screen(self, &edges, config.hypotheses, &pool, observer)?;
         self.interrupt().check()?;
+        if !completed {
+            // A screening with pairs left out would pass for a complete one when merged.
+            return Err(Error::Interrupted);
+        }
         let screening = Screening {
             fingerprint: fingerprint(self, config.hypotheses),
             pairs: screened

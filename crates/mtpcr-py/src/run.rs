@@ -66,6 +66,8 @@ fn call_observer(
 pub(crate) struct Callbacks {
     pub(crate) generation: Option<Py<PyAny>>,
     pub(crate) pair_screening: Option<Py<PyAny>>,
+    /// Whether a callback returning `False` stops the run.
+    pub(crate) may_stop: bool,
 }
 
 /// `f` when it is callable (`None` when absent), else a `TypeError` naming the argument.
@@ -150,6 +152,7 @@ pub(crate) fn register(
     let callbacks = Callbacks {
         generation: callable(on_generation, "on_generation")?,
         pair_screening: callable(on_pair_screening, "on_pair_screening")?,
+        may_stop: true,
     };
     if clouds.len() < 2 {
         return Err(PyTypeError::new_err(format!(
@@ -224,6 +227,7 @@ pub(crate) fn run_engine<T: Send>(
                 }
                 Python::attach(|py| match call_observer(py, callbacks, names, progress) {
                     Ok(true) => ControlFlow::Continue(()),
+                    Ok(false) if !callbacks.may_stop => ControlFlow::Continue(()),
                     Ok(false) => ControlFlow::Break(()),
                     Err(e) => {
                         if let Ok(mut slot) = failure.lock() {

@@ -24,7 +24,9 @@ use pyo3::types::{PyDict, PyList, PyTuple};
 /// per pair with ``source``, ``target``, ``poses`` (H, 4, 4: the hypotheses in the prepared,
 /// centred frames, meaningful only to ``register``), ``overlaps`` (H) and ``supports`` (H, the
 /// descriptor matches each explains). Clouds, ``seed``, ``config``, ``viewpoints`` and other
-/// keywords as for :func:`register`; ``on_pair_screening(screened, total)`` as there.
+/// keywords as for :func:`register`; ``on_pair_screening(screened, total)`` as there, but its
+/// return value is ignored (a screening is all or nothing; an exception in it, or Ctrl-C,
+/// stops it and propagates).
 #[pyfunction]
 #[pyo3(signature = (*clouds, pairs=None, seed=None, on_pair_screening=None, config=None, viewpoints=None, **settings))]
 #[allow(clippy::too_many_arguments)]
@@ -42,6 +44,8 @@ pub(crate) fn screen_pairs<'py>(
     let callbacks = Callbacks {
         generation: None,
         pair_screening: callable(on_pair_screening, "on_pair_screening")?,
+        // A screening is all or nothing: one with pairs left out would pass for complete.
+        may_stop: false,
     };
     let pairs = pairs
         .filter(|p| !p.is_none())
