@@ -13,6 +13,7 @@
 
 mod config;
 mod convert;
+mod engine;
 mod errors;
 mod evaluate;
 mod files;

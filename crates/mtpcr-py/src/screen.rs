@@ -3,7 +3,7 @@
 
 use crate::config::call_config;
 use crate::convert::transforms_to_py;
-use crate::run::{callable, clouds_from_py, run_engine, Callbacks};
+use crate::engine::{callable, clouds_from_py, run_engine, Callbacks};
 use mtpcr_core::{ScreenedPair, Screening, Transform};
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
