@@ -190,7 +190,7 @@ fn finish(
         let (start_poses, mut used) = place(pairs, chosen, &rejected, n, tolerance, &clear);
         let refined = refine_placed(prepared, config, pool, pairs, &used, &start_poses);
         prepared.interrupt().check()?;
-        let (measured, checks) = measure(prepared, pairs, &used, &refined);
+        let (measured, checks) = measure(prepared, pool, pairs, &used, &refined);
         // A pair is rejected for free space only beyond what a hypothesis may have (with the
         // verdict's limit the home placed 3 of its 60 fragments instead of 12; the verdict
         // still reports it).
@@ -256,7 +256,7 @@ fn finish(
             })
         })
         .collect();
-    let (_, checks) = measure(prepared, pairs, &used, &refined);
+    let (_, checks) = measure(prepared, pool, pairs, &used, &refined);
     let unplaced: Vec<Unplaced> = (0..n)
         .filter(|&v| refined[v].is_none())
         .map(|v| Unplaced {
@@ -310,18 +310,22 @@ fn finish(
 /// [`finish`]); a pair touching an unplaced scan would be skipped.
 fn measure(
     prepared: &PreparedProblem,
+    pool: &rayon::ThreadPool,
     pairs: &[Pair],
     used: &[usize],
     placed: &[Option<Transform>],
 ) -> (Vec<usize>, Vec<EdgeCheck>) {
-    used.iter()
-        .filter_map(|&p| {
-            let edge = pairs[p].edge;
-            let (ws, wt) = (placed[edge.source]?, placed[edge.target]?);
-            let check = prepared.check_edge(edge, &Rigid::from_matrix(&(invert_rigid(&wt) * ws)));
-            Some((p, check))
-        })
-        .unzip()
+    let measured: Vec<Option<(usize, EdgeCheck)>> = pool.install(|| {
+        used.par_iter()
+            .map(|&p| {
+                let edge = pairs[p].edge;
+                let (ws, wt) = (placed[edge.source]?, placed[edge.target]?);
+                let pose = Rigid::from_matrix(&(invert_rigid(&wt) * ws));
+                Some((p, prepared.check_edge(edge, &pose)))
+            })
+            .collect()
+    });
+    measured.into_iter().flatten().unzip()
 }
 
 /// The pose of group `a`'s frame relative to the other group's, `T_ab` (b's frame into a's),

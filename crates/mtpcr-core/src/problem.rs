@@ -448,10 +448,20 @@ impl PreparedProblem {
 
     /// The verdict's measures of `edge` at `t` (centred frames), free space included.
     pub(crate) fn check_edge(&self, edge: Edge, t: &Rigid) -> EdgeCheck {
+        // Independent measures, in the current rayon pool.
+        let ((free_space, constraint), surfaces) = rayon::join(
+            || {
+                rayon::join(
+                    || self.free_space_violation(edge.source, edge.target, t),
+                    || self.slide_constraint(edge.source, edge.target, t),
+                )
+            },
+            || check_edge(&self.full, edge, t, self.eps),
+        );
         EdgeCheck {
-            free_space: self.free_space_violation(edge.source, edge.target, t),
-            constraint: self.slide_constraint(edge.source, edge.target, t),
-            ..check_edge(&self.full, edge, t, self.eps)
+            free_space,
+            constraint,
+            ..surfaces
         }
     }
 

@@ -154,25 +154,27 @@ impl PreparedProblem {
                 .map(Some)
                 .collect(),
         };
-        let checks = graph
-            .edges()
-            .iter()
-            .zip(&centred)
-            .zip(matches.iter().zip(&hypotheses))
-            .map(|((e, t), (m, h))| {
-                let check = self.check_edge(*e, t);
-                // A pair alone has nothing else to verify it; in a loop, the loop does (an
-                // edge found through the loop may explain fewer matches than a wrong pose).
-                match m {
-                    Some(m) if edges == 1 => {
-                        let clearance =
-                            |r: &Rigid| self.free_space_clearance(e.source, e.target, r);
-                        with_support(check, m, t, h, clearance)
+        let checks = pool.install(|| {
+            graph
+                .edges()
+                .iter()
+                .zip(&centred)
+                .zip(matches.iter().zip(&hypotheses))
+                .map(|((e, t), (m, h))| {
+                    let check = self.check_edge(*e, t);
+                    // A pair alone has nothing else to verify it; in a loop, the loop does (an
+                    // edge found through the loop may explain fewer matches than a wrong pose).
+                    match m {
+                        Some(m) if edges == 1 => {
+                            let clearance =
+                                |r: &Rigid| self.free_space_clearance(e.source, e.target, r);
+                            with_support(check, m, t, h, clearance)
+                        }
+                        _ => check,
                     }
-                    _ => check,
-                }
-            })
-            .collect();
+                })
+                .collect()
+        });
         let mut reasons = Vec::new();
         if restarts_run > 1 && !agreed && completed {
             reasons.push(format!(

@@ -15,6 +15,7 @@ use crate::graph::Edge;
 use crate::refine::RefineCloud;
 use crate::se3::Rigid;
 use kiddo::SquaredEuclidean;
+use rayon::prelude::*;
 
 /// An edge is trusted only if at least this fraction of its points overlap.
 pub const MIN_OVERLAP: f64 = 0.1;
@@ -143,27 +144,33 @@ pub(crate) fn check_edge(
     t_target_source: &Rigid,
     eps: f64,
 ) -> EdgeCheck {
+    // In the current rayon pool; the residuals keep the points' order whatever its size.
     let one_way = |s: usize, t: usize, to_t: Rigid| -> (usize, usize, Vec<f64>) {
         let (src, dst) = (&clouds[s], &clouds[t]);
-        let mut residuals = Vec::new();
-        for p in src.points() {
-            let q = to_t.apply(p);
-            let nn = dst
-                .tree()
-                .query(&q)
-                .nearest_one::<SquaredEuclidean<f64>>()
-                .execute();
-            if nn.distance <= eps * eps {
-                let m = nn.item as usize;
-                let (y, n) = (dst.points()[m], dst.normals()[m]);
-                let r = (0..3).map(|k| n[k] * (q[k] - y[k])).sum::<f64>().abs();
-                residuals.push(r / eps);
-            }
-        }
+        let residuals: Vec<f64> = src
+            .points()
+            .par_iter()
+            .with_min_len(256)
+            .filter_map(|p| {
+                let q = to_t.apply(p);
+                let nn = dst
+                    .tree()
+                    .query(&q)
+                    .nearest_one::<SquaredEuclidean<f64>>()
+                    .execute();
+                (nn.distance <= eps * eps).then(|| {
+                    let m = nn.item as usize;
+                    let (y, n) = (dst.points()[m], dst.normals()[m]);
+                    (0..3).map(|k| n[k] * (q[k] - y[k])).sum::<f64>().abs() / eps
+                })
+            })
+            .collect();
         (residuals.len(), src.points().len(), residuals)
     };
-    let (a, na, mut ra) = one_way(edge.source, edge.target, *t_target_source);
-    let (b, nb, rb) = one_way(edge.target, edge.source, t_target_source.inverse());
+    let ((a, na, mut ra), (b, nb, rb)) = rayon::join(
+        || one_way(edge.source, edge.target, *t_target_source),
+        || one_way(edge.target, edge.source, t_target_source.inverse()),
+    );
     ra.extend(rb);
     let overlap = 0.5 * (a as f64 / na.max(1) as f64 + b as f64 / nb.max(1) as f64);
     EdgeCheck {

@@ -392,13 +392,16 @@ fn consensus_hypotheses(matched: &Matched, config: &FeatureConfig) -> Vec<Hypoth
         .par_iter()
         .filter_map(|&a| {
             let row = &rows[a];
-            let mut joined: Vec<(u32, usize)> = (0..n)
-                .filter(|&b| row[b / 64] >> (b % 64) & 1 == 1)
-                .map(|b| {
+            let mut joined: Vec<(u32, usize)> = Vec::new();
+            for (w, &word) in row.iter().enumerate() {
+                let mut bits = word;
+                while bits != 0 {
+                    let b = w * 64 + bits.trailing_zeros() as usize;
                     let shared = row.iter().zip(&rows[b]).map(|(x, y)| (x & y).count_ones());
-                    (shared.sum::<u32>(), b)
-                })
-                .collect();
+                    joined.push((shared.sum::<u32>(), b));
+                    bits &= bits - 1;
+                }
+            }
             joined.sort_by_key(|&(s, b)| (std::cmp::Reverse(s), b));
             joined.truncate(CONSENSUS_SIZE);
             let mut set: Vec<usize> = std::iter::once(a)
@@ -429,13 +432,17 @@ fn compatibility(matched: &Matched, ids: &[usize], tau: f64) -> Vec<Vec<u64>> {
     let t = [0, 1, 2].map(|k| column(&matched.tgt, k));
     let n = ids.len();
     let tau = tau as f32;
-    (0..n)
+    let words = n.div_ceil(64);
+    // Each row from its own block of 64 on (half the work): the test is symmetric to the
+    // last bit (the same squares summed in the same order), so the blocks left of the
+    // diagonal are filled in below from the rows above them.
+    let mut rows: Vec<Vec<u64>> = (0..n)
         .into_par_iter()
         .with_min_len(16)
         .map(|a| {
-            let mut row = vec![0u64; n.div_ceil(64)];
+            let mut row = vec![0u64; words];
             let mut gap = [0f32; 64];
-            for (w, word) in row.iter_mut().enumerate() {
+            for (w, word) in row.iter_mut().enumerate().skip(a / 64) {
                 let lo = w * 64;
                 let hi = (lo + 64).min(n);
                 for (b, g) in (lo..hi).zip(gap.iter_mut()) {
@@ -454,7 +461,40 @@ fn compatibility(matched: &Matched, ids: &[usize], tau: f64) -> Vec<Vec<u64>> {
             row[a / 64] &= !(1 << (a % 64));
             row
         })
-        .collect()
+        .collect();
+    // Block (rows of block a, word b) is the transpose of block (rows of block b, word a).
+    for wa in 1..words {
+        for wb in 0..wa {
+            let mut block = [0u64; 64];
+            for (k, x) in block.iter_mut().enumerate() {
+                *x = rows[wb * 64 + k][wa];
+            }
+            transpose_bits(&mut block);
+            for (row, x) in rows[wa * 64..].iter_mut().zip(block) {
+                row[wb] = x;
+            }
+        }
+    }
+    rows
+}
+
+/// Transposes a 64 x 64 bit matrix in place: bit `j` of `m[k]` becomes bit `k` of `m[j]`
+/// (swapping ever smaller blocks: Hacker's Delight, 7-3).
+fn transpose_bits(m: &mut [u64; 64]) {
+    let mut width = 32;
+    let mut mask: u64 = 0x0000_0000_FFFF_FFFF;
+    while width != 0 {
+        let mut k = 0;
+        while k < 64 {
+            // Row k's high half-block and row k + width's low one trade places.
+            let t = ((m[k] >> width) ^ m[k + width]) & mask;
+            m[k + width] ^= t;
+            m[k] ^= t << width;
+            k = (k + width + 1) & !width;
+        }
+        width >>= 1;
+        mask ^= mask << width;
+    }
 }
 
 /// Draws for a triple of inliers to be seen with probability `confidence` when `inliers` of
@@ -767,4 +807,68 @@ fn dist2(a: &[f64; 3], b: &[f64; 3]) -> f64 {
     let dy = a[1] - b[1];
     let dz = a[2] - b[2];
     dx * dx + dy * dy + dz * dz
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_bit_matrix_transposes() {
+        let mut rng = ChaCha8Rng::seed_from_u64(9);
+        let m: [u64; 64] = std::array::from_fn(|_| rng.random::<u64>());
+        let mut t = m;
+        transpose_bits(&mut t);
+        for j in 0..64 {
+            for k in 0..64 {
+                assert_eq!(t[j] >> k & 1, m[k] >> j & 1, "bit {k} of row {j}");
+            }
+        }
+    }
+
+    #[test]
+    fn the_compatibility_graph_is_every_pair_tested_both_ways() {
+        // 150 matches (not a multiple of 64), half of them inliers of one motion.
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let mut point = || [0, 1, 2].map(|_| rng.random_range(-1.0..1.0));
+        let (mut src, mut tgt) = (Vec::new(), Vec::new());
+        for k in 0..150 {
+            let p = point();
+            src.push(p);
+            tgt.push(if k % 2 == 0 {
+                [p[0] + 0.5, p[1], p[2]]
+            } else {
+                point()
+            });
+        }
+        let matched = Matched {
+            src_n: vec![[0.0, 0.0, 1.0]; src.len()],
+            tgt_n: vec![[0.0, 0.0, 1.0]; tgt.len()],
+            src,
+            tgt,
+            d2: 0.01,
+            cos_min: 0.5,
+        };
+        let ids: Vec<usize> = (0..150).collect();
+        let tau = 0.1;
+        let rows = compatibility(&matched, &ids, tau);
+        let mut set = 0;
+        for a in 0..150 {
+            for b in 0..150 {
+                let gap = (dist2(&matched.src[a], &matched.src[b]).sqrt()
+                    - dist2(&matched.tgt[a], &matched.tgt[b]).sqrt())
+                .abs();
+                let bit = rows[a][b / 64] >> (b % 64) & 1 == 1;
+                if a == b || (gap - tau).abs() < 1e-4 {
+                    // The diagonal is never set; a gap at tau is single precision's call.
+                    assert!(a != b || !bit);
+                    continue;
+                }
+                assert_eq!(bit, gap < tau, "matches {a} and {b}: gap {gap}");
+                set += usize::from(bit);
+            }
+        }
+        // The 75 inliers are all compatible with each other.
+        assert!(set >= 75 * 74, "{set}");
+    }
 }
