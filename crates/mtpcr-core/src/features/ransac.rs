@@ -819,9 +819,9 @@ mod tests {
         let m: [u64; 64] = std::array::from_fn(|_| rng.random::<u64>());
         let mut t = m;
         transpose_bits(&mut t);
-        for j in 0..64 {
-            for k in 0..64 {
-                assert_eq!(t[j] >> k & 1, m[k] >> j & 1, "bit {k} of row {j}");
+        for (j, row) in t.iter().enumerate() {
+            for (k, original) in m.iter().enumerate() {
+                assert_eq!(row >> k & 1, original >> j & 1, "bit {k} of row {j}");
             }
         }
     }
@@ -853,12 +853,12 @@ mod tests {
         let tau = 0.1;
         let rows = compatibility(&matched, &ids, tau);
         let mut set = 0;
-        for a in 0..150 {
+        for (a, row) in rows.iter().enumerate() {
             for b in 0..150 {
                 let gap = (dist2(&matched.src[a], &matched.src[b]).sqrt()
                     - dist2(&matched.tgt[a], &matched.tgt[b]).sqrt())
                 .abs();
-                let bit = rows[a][b / 64] >> (b % 64) & 1 == 1;
+                let bit = row[b / 64] >> (b % 64) & 1 == 1;
                 if a == b || (gap - tau).abs() < 1e-4 {
                     // The diagonal is never set; a gap at tau is single precision's call.
                     assert!(a != b || !bit);
