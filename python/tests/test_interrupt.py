@@ -11,7 +11,10 @@ import time
 import pytest
 
 SCRIPT = """
-import numpy as np, mtpcr, sys
+import numpy as np, mtpcr, signal, sys
+# Ctrl-C as at a terminal: a child of a shell's background job starts with SIGINT ignored, and
+# Python then never raises KeyboardInterrupt.
+signal.signal(signal.SIGINT, signal.default_int_handler)
 rng = np.random.default_rng(0)
 cloud = rng.normal(size=(400_000, 3))
 print("ready", flush=True)

@@ -259,9 +259,13 @@ def test_ctrl_c_stops_a_long_run_with_keyboard_interrupt():
     # A real SIGINT to a process running a practically endless registration, without a callback.
     code = textwrap.dedent(
         """
+        import signal
         import sys
         import numpy as np
         import mtpcr
+        # Ctrl-C as at a terminal: a child of a shell's background job starts with SIGINT
+        # ignored, and Python then never raises KeyboardInterrupt.
+        signal.signal(signal.SIGINT, signal.default_int_handler)
         rng = np.random.default_rng(0)
         clouds = [rng.normal(size=(3000, 3)) for _ in range(3)]
         print("ready", flush=True)
