@@ -23,7 +23,8 @@ pub struct PairArgs {
     /// (comma-separated).
     #[arg(long, value_delimiter = ',', value_name = "NAME")]
     pub scenes: Vec<String>,
-    /// Pair benchmarks: move each source fragment by a seeded random rigid motion first.
+    /// Pair benchmarks: move each source fragment by a seeded random rigid motion first (the
+    /// errors are still measured in the fragment's own frame, as the benchmark defines them).
     #[arg(long)]
     pub moved: bool,
     /// Pair benchmarks: append every pair's record to this JSON-lines file, and skip the

@@ -137,7 +137,8 @@ pub(crate) fn evaluate<'py>(
 /// ``pairs`` runs a seeded sample of that many pairs (the same pairs for the same seed;
 /// default every pair); ``scenes`` keeps the scenes whose folder name contains one of these
 /// strings. ``seed`` seeds the sample and every registration (default: the config's seed,
-/// else 0). ``moved`` moves each source fragment by a seeded random rigid motion first.
+/// else 0). ``moved`` moves each source fragment by a seeded random rigid motion first (the
+/// errors are still measured in the fragment's own frame, as the benchmark defines them).
 /// Fragments are read from ``data_root/<scene>/cloud_bin_<k>.ply`` (default: the benchmark
 /// folder's grandparent). Settings are ``Config`` fields as keywords, over ``config``
 /// (default ``Config()``), as for :func:`register`.
