@@ -98,7 +98,6 @@ fn most_of_a_sample_of_3dmatch_pairs_is_registered() {
 )]
 fn on_3dlomatch_pairs_right_poses_keep_out_of_free_space_and_wrong_ones_do_not() {
     use mtpcr_core::eval::pairs::{run_benchmark, PairBenchmark};
-    use mtpcr_core::verdict::MAX_FREE_SPACE;
     use std::ops::ControlFlow;
     let dir = common::shared_dir().join("data/3dmatch/benchmarks/3DLoMatch");
     let mut benchmark = PairBenchmark::load(&dir, None).unwrap_or_else(|e| panic!("{e}"));
@@ -132,9 +131,10 @@ fn on_3dlomatch_pairs_right_poses_keep_out_of_free_space_and_wrong_ones_do_not()
     };
     assert!(median(true) < 0.05, "{free:?}");
     assert!(median(false) > median(true), "{free:?}");
+    // The free space is weighed with the other cues (`verdict::SCENE_ODDS`): over every
+    // visible pair no confident pose put more than 0.15 there.
     assert!(
-        free.iter()
-            .all(|&(_, confident, f)| !confident || f <= MAX_FREE_SPACE),
+        free.iter().all(|&(_, confident, f)| !confident || f <= 0.2),
         "{free:?}"
     );
 }

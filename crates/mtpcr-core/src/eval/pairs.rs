@@ -273,7 +273,7 @@ pub struct PairRecord {
     #[serde(default)]
     pub rival_support: Option<usize>,
     /// The share of one fragment put where the other's camera saw through (see
-    /// [`crate::verdict::MAX_FREE_SPACE`]; absent in records of older versions).
+    /// [`crate::verdict::EdgeCheck::free_space`]; absent in records of older versions).
     #[serde(default)]
     pub free_space: Option<f64>,
     /// Seconds of the registration (reading the files excluded).
