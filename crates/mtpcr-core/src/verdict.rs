@@ -76,13 +76,17 @@ pub const MAX_FREE_SPACE: f64 = 0.05;
 /// own limit: the log-odds that the pose is right (rotation under 15 degrees, translation
 /// under 30 cm), a logistic fit over 4838 records of every visible 3DMatch and 3DLoMatch pair
 /// (seed 0, as read and with random motions):
-/// `7.07 + 1.21 ln(1 + support) - 0.98 ln(1 + rival) - 43.6 min(free space, 0.3)
-/// + 1.90 ln(constraint + 0.001) + 3.75 overlap - 17.7 residual`.
-/// One weak cue no longer decides alone: a right pose of a cluttered room that puts 6 % in
-/// free space but explains 80 matches is trusted, a wrong one with 8 matches, no rival and
-/// 2 % in free space is not. The pair is trusted at [`MIN_SCENE_LOG_ODDS`] and above.
-/// Measured (RESULTS.md, 2026-12-05): the separate limits called 31 of 677 failed pairs
-/// confident (4.6 %) and doubted 277 of 1742 registered (15.9 %), with random motions 50 of
+///
+/// ```text
+/// 7.07 + 1.21 ln(1 + support) - 0.98 ln(1 + rival) - 43.6 min(free space, 0.3)
+///      + 1.90 ln(constraint + 0.001) + 3.75 overlap - 17.7 residual
+/// ```
+///
+/// One cue no longer decides alone: with the other cues as a typical confident pair's
+/// ([`TYPICAL_SCENE_PAIR`]), a pose that puts 10 % in free space is trusted when 150 matches
+/// agree with it and doubted when 8 do. The pair is trusted at [`MIN_SCENE_LOG_ODDS`] and
+/// above. Measured (RESULTS.md, 2026-12-04, fourth session): the separate limits called 31 of
+/// 677 failed pairs confident (4.6 %) and doubted 277 of 1742 registered (15.9 %), with random motions 50 of
 /// 703 (7.1 %) and 246 of 1716 (14.3 %); the weighed cues 21 / 677 (3.1 %) and 216 / 1742
 /// (12.4 %), 21 / 703 (3.0 %) and 192 / 1716 (11.2 %); fitted on four scenes and judged on
 /// the fifth, in turn: 4.3 % and 13.1 %, 4.3 % and 11.6 %.
@@ -151,7 +155,7 @@ pub const MIN_SCENE_LOG_ODDS: f64 = 1.86;
 
 /// What a confident scene pair typically measures (medians over the records of
 /// [`SceneOdds`]): the reason of a doubt names the cue that falls farthest below it.
-const TYPICAL_SCENE_PAIR: EdgeCheck = EdgeCheck {
+pub const TYPICAL_SCENE_PAIR: EdgeCheck = EdgeCheck {
     source: 0,
     target: 1,
     overlap: 0.48,
