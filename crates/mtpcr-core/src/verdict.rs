@@ -85,9 +85,9 @@ pub const MAX_FREE_SPACE: f64 = 0.05;
 /// One cue no longer decides alone: with the other cues as a typical confident pair's
 /// ([`TYPICAL_SCENE_PAIR`]), a pose that puts 10 % in free space is trusted when 150 matches
 /// agree with it and doubted when 8 do. The pair is trusted at [`MIN_SCENE_LOG_ODDS`] and
-/// above. Measured (RESULTS.md, 2026-12-04, fourth session): the separate limits called 31 of
-/// 677 failed pairs confident (4.6 %) and doubted 277 of 1742 registered (15.9 %), with random motions 50 of
-/// 703 (7.1 %) and 246 of 1716 (14.3 %); the weighed cues 21 / 677 (3.1 %) and 216 / 1742
+/// above. Measured (RESULTS.md, 2026-12-04, fourth session): the separate limits called 31
+/// of 677 failed pairs confident (4.6 %) and doubted 277 of 1742 registered (15.9 %), with
+/// random motions 50 of 703 (7.1 %) and 246 of 1716 (14.3 %); the weighed cues 21 / 677 (3.1 %) and 216 / 1742
 /// (12.4 %), 21 / 703 (3.0 %) and 192 / 1716 (11.2 %); fitted on four scenes and judged on
 /// the fifth, in turn: 4.3 % and 13.1 %, 4.3 % and 11.6 %.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -148,9 +148,8 @@ pub const SCENE_ODDS: SceneOdds = SceneOdds {
     residual: -17.7,
 };
 
-/// A scene pair is trusted at this log-odds and above (odds 6.4 : 1). Chosen on the same
-/// records as the highest failed pair in 33 that it would let through (3 % of the failures
-/// confident, in the fit; 4.3 % judged on a scene left out of it).
+/// A scene pair is trusted at this log-odds and above (odds 6.4 : 1): on the records of the
+/// fit it lets 3 % of the failed pairs through (4.3 % on a scene left out of the fit).
 pub const MIN_SCENE_LOG_ODDS: f64 = 1.86;
 
 /// What a confident scene pair typically measures (medians over the records of
@@ -166,8 +165,10 @@ pub const TYPICAL_SCENE_PAIR: EdgeCheck = EdgeCheck {
     rival_support: Some(0),
     free_space: Some(0.007),
 };
+
 /// An edge is trusted only if its overlapping surfaces hold it against a slide this firmly
-/// ([`EdgeCheck::constraint`]). On scenes a wrong pose often slides the right overlay along a
+/// ([`EdgeCheck::constraint`]; a scene pair's constraint is weighed by [`SCENE_ODDS`]
+/// instead, the limit serving objects and rooms). On scenes a wrong pose often slides the right overlay along a
 /// wall and floor by 30-45 cm, where overlap, residual, free space and matches all look right:
 /// on 300 + 300 3DMatch / 3DLoMatch pairs (seed 1), the 9 failed pairs called confident had
 /// 0.006-0.11 (median 0.019; 6 of them 33-45 cm off), the 375 registered and confident
@@ -205,8 +206,8 @@ pub struct EdgeCheck {
     /// violates, as in the choice of the pose).
     pub rival_support: Option<usize>,
     /// The share of one scan's points put where the other scanner saw through (the larger
-    /// direction; weighed with the other cues by [`SCENE_ODDS`]), 1 when one scanner stands behind a surface the
-    /// other saw (see [`crate::freespace`]); `None` without viewpoints.
+    /// direction; weighed with the other cues by [`SCENE_ODDS`]), 1 when one scanner stands
+    /// behind a surface the other saw (see [`crate::freespace`]); `None` without viewpoints.
     pub free_space: Option<f64>,
 }
 
