@@ -417,6 +417,11 @@ impl PreparedProblem {
         Ok(Some((matches, poses)))
     }
 
+    /// Whether any scan's viewpoint is known (free space is measured).
+    pub(crate) fn has_viewpoints(&self) -> bool {
+        !self.free_space.is_empty()
+    }
+
     /// The share of one scan's points that `t` (cloud `s` -> cloud `d`, centred frames) puts
     /// where the other's scanner saw through (see [`crate::freespace`]); `None` without
     /// viewpoints.
