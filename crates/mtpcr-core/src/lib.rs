@@ -40,6 +40,7 @@ pub mod interrupt;
 pub mod io;
 pub mod loss;
 mod multiview;
+mod posegraph;
 pub mod problem;
 mod refine;
 mod register;

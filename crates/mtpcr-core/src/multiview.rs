@@ -23,6 +23,7 @@ use crate::ea::{Observer, Progress, Stage};
 use crate::error::{Error, Result};
 use crate::graph::Edge;
 use crate::loss::Loss;
+use crate::posegraph::{self, Relative};
 use crate::problem::{HypothesisSearch, PreparedProblem};
 use crate::refine::refine_poses;
 use crate::result::{EdgeEstimate, Registration, Unplaced};
@@ -172,7 +173,8 @@ fn finish(
     let mut round = 0;
     let (used, refined) = loop {
         round += 1;
-        let (start_poses, mut used) = place(pairs, chosen, &rejected, n, tolerance, &clear);
+        let (placed, mut used) = place(pairs, chosen, &rejected, n, tolerance, &clear);
+        let start_poses = settle(pairs, chosen, &rejected, &placed, tolerance);
         let refined = refine_placed(prepared, config, pool, pairs, &used, &start_poses);
         prepared.interrupt().check()?;
         let (measured, checks) = measure(prepared, pool, pairs, &used, &refined);
@@ -553,6 +555,36 @@ fn place(
     }
     used.sort_unstable();
     (poses, used)
+}
+
+/// The placed scans' poses (centred, into scan 0's frame) fitted to every chosen, not
+/// rejected pair between placed scans that agrees with the placement ([`CONSENSUS_DEGREES`],
+/// twice the loop tolerance), each weighted by the matches it explains
+/// ([`crate::posegraph`]): the placement follows a tree of pairs, whose errors add up across
+/// a room; the pairs closing loops share them out.
+fn settle(
+    pairs: &[Pair],
+    chosen: &[Option<usize>],
+    rejected: &[bool],
+    placed: &[Option<Transform>],
+    tolerance: f64,
+) -> Vec<Option<Transform>> {
+    let relatives: Vec<Relative> = (0..pairs.len())
+        .filter(|&p| !rejected[p])
+        .filter_map(|p| {
+            let h = chosen[p]?;
+            let Edge { source, target } = pairs[p].edge;
+            let (own, support) = (pairs[p].poses.get(h)?.0, *pairs[p].supports.get(h)?);
+            let implied = invert_rigid(&placed[target]?) * placed[source]?;
+            agree(&implied, &own, CONSENSUS_DEGREES, 2.0 * tolerance).then_some(Relative {
+                source,
+                target,
+                t_target_source: own,
+                weight: support.max(1) as f64,
+            })
+        })
+        .collect();
+    posegraph::fit(placed, &relatives, 0)
 }
 
 /// The poses (centred, into scan 0's frame) of the placed scans (`start`; `None`: not
