@@ -11,8 +11,9 @@
 //!    of several scans join only when the loop through them closes (a second pair, touching
 //!    other scans, agrees: the paper's loop consistency as a verifier, [`place`]); with
 //!    viewpoints, no join may put a scan where a scanner of the other group saw through.
-//!    Scan 0's group is placed; chosen pairs that agree with it and overlap well are loop
-//!    closures. Scans outside it are reported unplaced, with the reason.
+//!    Scan 0's group is placed, its poses then fitted to every chosen pair that agrees with
+//!    the placement ([`settle`], a pose graph); chosen pairs that agree with it and overlap
+//!    well are loop closures. Scans outside it are reported unplaced, with the reason.
 //! 4. **Refinement**: the joint ICP of all placed scans over the joining pairs and the
 //!    closures (pairs of placed scans only). A pair that fails the verdict at the refined
 //!    poses is rejected and the scans placed again without it; a scan that so loses its
