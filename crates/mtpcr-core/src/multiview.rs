@@ -380,6 +380,33 @@ fn loop_closes(
     agreeing >= 2 && ends_a.len() >= 2 && ends_b.len() >= 2 && for_it > against
 }
 
+/// The chosen, not rejected pairs between placed scans whose pose agrees with the placement
+/// ([`CONSENSUS_DEGREES`], twice the loop tolerance), each weighted by the matches it
+/// explains.
+fn confirming(
+    pairs: &[Pair],
+    chosen: &[Option<usize>],
+    rejected: &[bool],
+    placed: &[Option<Transform>],
+    tolerance: f64,
+) -> Vec<Relative> {
+    (0..pairs.len())
+        .filter(|&p| !rejected[p])
+        .filter_map(|p| {
+            let h = chosen[p]?;
+            let Edge { source, target } = pairs[p].edge;
+            let (own, support) = (pairs[p].poses.get(h)?.0, *pairs[p].supports.get(h)?);
+            let implied = invert_rigid(&placed[target]?) * placed[source]?;
+            agree(&implied, &own, CONSENSUS_DEGREES, 2.0 * tolerance).then_some(Relative {
+                source,
+                target,
+                t_target_source: own,
+                weight: support.max(1) as f64,
+            })
+        })
+        .collect()
+}
+
 /// The placed scans (other than scan 0) that fewer than two chosen, not rejected pairs put
 /// where they are (their chosen pose agrees with the placement to [`CONSENSUS_DEGREES`] and
 /// twice the loop tolerance). Such a scan joined by one pair alone: nothing but that pair
@@ -393,22 +420,9 @@ fn unconfirmed(
     tolerance: f64,
 ) -> Vec<usize> {
     let mut agreeing = vec![0usize; placed.len()];
-    for (p, pair) in pairs.iter().enumerate() {
-        let Some(&(own, _)) = chosen[p].and_then(|h| pair.poses.get(h)) else {
-            continue;
-        };
-        let Edge {
-            source: s,
-            target: t,
-        } = pair.edge;
-        let (Some(ws), Some(wt)) = (placed[s], placed[t]) else {
-            continue;
-        };
-        let implied = invert_rigid(&wt) * ws;
-        if !rejected[p] && agree(&implied, &own, CONSENSUS_DEGREES, 2.0 * tolerance) {
-            agreeing[s] += 1;
-            agreeing[t] += 1;
-        }
+    for p in confirming(pairs, chosen, rejected, placed, tolerance) {
+        agreeing[p.source] += 1;
+        agreeing[p.target] += 1;
     }
     (1..placed.len())
         .filter(|&v| placed[v].is_some() && agreeing[v] < 2)
@@ -558,9 +572,7 @@ fn place(
     (poses, used)
 }
 
-/// The placed scans' poses (centred, into scan 0's frame) fitted to every chosen, not
-/// rejected pair between placed scans that agrees with the placement ([`CONSENSUS_DEGREES`],
-/// twice the loop tolerance), each weighted by the matches it explains
+/// The placed scans' poses (centred, into scan 0's frame) fitted to every [`confirming`] pair
 /// ([`crate::posegraph`]): the placement follows a tree of pairs, whose errors add up across
 /// a room; the pairs closing loops share them out.
 fn settle(
@@ -570,21 +582,7 @@ fn settle(
     placed: &[Option<Transform>],
     tolerance: f64,
 ) -> Vec<Option<Transform>> {
-    let relatives: Vec<Relative> = (0..pairs.len())
-        .filter(|&p| !rejected[p])
-        .filter_map(|p| {
-            let h = chosen[p]?;
-            let Edge { source, target } = pairs[p].edge;
-            let (own, support) = (pairs[p].poses.get(h)?.0, *pairs[p].supports.get(h)?);
-            let implied = invert_rigid(&placed[target]?) * placed[source]?;
-            agree(&implied, &own, CONSENSUS_DEGREES, 2.0 * tolerance).then_some(Relative {
-                source,
-                target,
-                t_target_source: own,
-                weight: support.max(1) as f64,
-            })
-        })
-        .collect();
+    let relatives = confirming(pairs, chosen, rejected, placed, tolerance);
     posegraph::fit(placed, &relatives, 0)
 }
 
