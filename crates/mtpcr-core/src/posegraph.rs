@@ -110,9 +110,10 @@ pub(crate) fn fit(
             }
         }
     }
-    // Translations given the rotations: t_s - t_t = R_t t_p for each pair.
-    let mut h = DMatrix::<f64>::zeros(3 * unknowns, 3 * unknowns);
-    let mut g = DVector::<f64>::zeros(3 * unknowns);
+    // Translations given the rotations: t_s - t_t = R_t t_p for each pair. The three axes
+    // share one system (the pairs' weighted graph), with a right-hand side column each.
+    let mut h = DMatrix::<f64>::zeros(unknowns, unknowns);
+    let mut g = DMatrix::<f64>::zeros(unknowns, 3);
     let position = |v: usize| -> Vector3<f64> {
         poses[v].map_or(Vector3::zeros(), |t| {
             t.fixed_view::<3, 1>(0, 3).into_owned()
@@ -133,12 +134,10 @@ pub(crate) fn fit(
             let Some(ci) = ci else { continue };
             for &(cj, sj) in &terms {
                 let Some(cj) = cj else { continue };
-                for k in 0..3 {
-                    h[(3 * ci + k, 3 * cj + k)] += p.weight * si * sj;
-                }
+                h[(ci, cj)] += p.weight * si * sj;
             }
             for k in 0..3 {
-                g[3 * ci + k] += p.weight * si * rhs[k];
+                g[(ci, k)] += p.weight * si * rhs[k];
             }
         }
     }
@@ -152,7 +151,7 @@ pub(crate) fn fit(
             };
             out.fixed_view_mut::<3, 3>(0, 0).copy_from(&r[v]);
             for k in 0..3 {
-                out[(k, 3)] = t[3 * c + k];
+                out[(k, 3)] = t[(c, k)];
             }
             Some(out)
         })
