@@ -90,8 +90,10 @@ impl Pair {
 /// A room's scans are refined pair by pair ([`refine_room`]) over at most this many pairs a
 /// scan (most matches first, a pair kept while either scan has fewer): the kitchen's 60
 /// fragments have about 500 confirming pairs, which took 11 s more than the joint ICP; with
-/// 6 (220 pairs) 1 s more, and the rooms placed as well or better (RESULTS.md, 2026-12-05).
-const PAIRS_PER_SCAN: usize = 6;
+/// 4 no more time than the joint ICP, and over five rooms and three seeds 4 wrong fragments
+/// and 357 within 5 degrees and 15 cm, against 6 and 350 with 6 a scan (RESULTS.md,
+/// 2026-12-05).
+const PAIRS_PER_SCAN: usize = 4;
 
 /// Rounds of placement: a pair whose fit fails at the refined poses is rejected and the
 /// groups built again without it.
@@ -610,9 +612,9 @@ fn settle(
 ///
 /// Why not the joint ICP of [`refine_placed`]: on rooms it turned the pose fit's poses
 /// several degrees away again (the study, 66 fragments, seed 0: 6 of 35 placed within 5
-/// degrees and 15 cm of the truth in fragment 1's frame with it, 23 with this), and it left a
+/// degrees and 15 cm of the truth in fragment 1's frame with it, 21 with this), and it left a
 /// group of the home 9 fragments wrong (seed 2); over five rooms and three seeds, 27 wrong
-/// fragments against 6, the same fragments placed (RESULTS.md, 2026-12-05). Each pair's own
+/// fragments against 4, the same fragments placed (RESULTS.md, 2026-12-05). Each pair's own
 /// fit lets the loops share out the errors of pairs that slide.
 #[allow(clippy::too_many_arguments)]
 fn refine_room(
