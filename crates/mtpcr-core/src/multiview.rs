@@ -31,8 +31,8 @@ use crate::result::{EdgeEstimate, Registration, Unplaced};
 use crate::screening::{fingerprint, ScreenedPair, Screening};
 use crate::se3::{invert_rigid, rotation_error_deg, translation_error, Rigid, Transform};
 use crate::verdict::{
-    doubts, judge, EdgeCheck, HYPOTHESIS_FREE_SPACE, MAX_RESIDUAL, MIN_OVERLAP, MIN_SUPPORT,
-    RIVAL_RATIO,
+    doubts, judge, EdgeCheck, HYPOTHESIS_FREE_SPACE, MAX_RESIDUAL, MIN_OVERLAP, MIN_SCENE_LOG_ODDS,
+    MIN_SUPPORT, RIVAL_RATIO,
 };
 use rayon::prelude::*;
 
@@ -268,7 +268,14 @@ fn finish(
         .filter(|&v| refined[v].is_none())
         .map(|v| Unplaced {
             view: v,
-            reason: unplaced_reason(v, pairs, chosen, &rejected, &failed),
+            reason: unplaced_reason(
+                v,
+                pairs,
+                chosen,
+                &rejected,
+                &failed,
+                prepared.has_viewpoints(),
+            ),
         })
         .collect();
     let poses = refined
@@ -1029,13 +1036,15 @@ pub(crate) fn loop_tolerance(prepared: &PreparedProblem) -> f64 {
     LOOP_SHIFT_FRACTION * prepared.shift()
 }
 
-/// Why scan `v` could not be placed (`failed`: why a pair failed at refined poses).
+/// Why scan `v` could not be placed (`failed`: why a pair failed at refined poses; `weighed`:
+/// the pairs were chosen by the pair verdict, as with viewpoints, see [`choose`]).
 fn unplaced_reason(
     v: usize,
     pairs: &[Pair],
     chosen: &[Option<usize>],
     rejected: &[bool],
     failed: &[Option<String>],
+    weighed: bool,
 ) -> String {
     let mine: Vec<usize> = (0..pairs.len())
         .filter(|&p| pairs[p].edge.source == v || pairs[p].edge.target == v)
@@ -1065,6 +1074,11 @@ fn unplaced_reason(
     } else if mine.iter().any(|&p| chosen[p].is_some()) {
         format!(
             "the poses of scan {} that stand out failed the surface test (overlap at least {MIN_OVERLAP} and residual at most {MAX_RESIDUAL} of eps needed)",
+            v + 1
+        )
+    } else if weighed {
+        format!(
+            "no pose of scan {} against another scan is trusted by the pair verdict (its matches, their rival, free space, hold against a slide, overlap and residual weighed together, log-odds at least {MIN_SCENE_LOG_ODDS} needed; most matches found {most}; best overlap {best:.2})",
             v + 1
         )
     } else {
@@ -1464,5 +1478,20 @@ mod tests {
             let shift = translation_error(&pose.unwrap(), &true_pose(v));
             assert!(shift < 2e-3, "scan {v}: {shift}");
         }
+    }
+
+    /// A scan none of whose pairs is chosen is reported by the rule that chose: the pair
+    /// verdict with viewpoints (a room), the matches without (an object).
+    #[test]
+    fn an_unchosen_scan_is_reported_by_the_rule_that_chose() {
+        let (_, pairs) = corner_room();
+        let chosen = [None; 4];
+        let rejected = [true; 4];
+        let failed = vec![None; 4];
+        let room = unplaced_reason(1, &pairs, &chosen, &rejected, &failed, true);
+        let object = unplaced_reason(1, &pairs, &chosen, &rejected, &failed, false);
+        assert!(room.contains("trusted by the pair verdict"), "{room}");
+        assert!(!room.contains("descriptor matches explained"), "{room}");
+        assert!(object.contains("stands out"), "{object}");
     }
 }
