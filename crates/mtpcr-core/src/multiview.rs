@@ -177,10 +177,12 @@ fn finish(
             })
         })
     };
-    // A room (scans with viewpoints) is refined pair by pair, then fitted to its pairs; the
-    // scans of an object together, by the joint ICP over the placement's pairs (`used`).
+    // A room (scans with viewpoints: its pairs chosen by the pair verdict, see [`choose`]) is
+    // refined pair by pair, then fitted to its pairs; the scans of an object together, by the
+    // joint ICP over the placement's pairs (`used`).
+    let room = prepared.has_viewpoints();
     let refine = |used: &[usize], start: &[Option<Transform>], rejected: &[bool]| {
-        if prepared.has_viewpoints() {
+        if room {
             refine_room(
                 prepared, config, pool, pairs, chosen, rejected, start, tolerance,
             )
@@ -268,14 +270,7 @@ fn finish(
         .filter(|&v| refined[v].is_none())
         .map(|v| Unplaced {
             view: v,
-            reason: unplaced_reason(
-                v,
-                pairs,
-                chosen,
-                &rejected,
-                &failed,
-                prepared.has_viewpoints(),
-            ),
+            reason: unplaced_reason(v, pairs, chosen, &rejected, &failed, room),
         })
         .collect();
     let poses = refined
@@ -1436,7 +1431,9 @@ mod tests {
                 room.push([-1.0, j as f64 * 0.025, 1.0 + k as f64 * 0.025]);
             }
         }
-        let (prepared, mut pairs) = room_of(room.clone());
+        let (prepared, mut pairs) = room_of(room);
+        // The true pair poses (centred), before they are put off.
+        let truth: Vec<Transform> = pairs.iter().map(|p| p.poses[0].0).collect();
         for (k, pair) in pairs.iter_mut().enumerate() {
             let off = pose(2.0 + 0.3 * k as f64, [0.02, -0.01 * k as f64, 0.01]).to_matrix();
             pair.poses[0].0 *= off;
@@ -1454,12 +1451,11 @@ mod tests {
         let refined = refine_room(
             &prepared, &config, &pool, &pairs, &chosen, &rejected, &start, tolerance,
         );
-        let (_, truth) = room_of(room);
         // Scan v's true pose in scan 0's frame, from the true pair 0 -> 1 and its chain.
         let true_pose = |v: usize| -> Transform {
-            let t10 = truth[0].poses[0].0; // 0 -> 1
-            let t32 = truth[1].poses[0].0; // 2 -> 3
-            let t21 = truth[2].poses[0].0; // 1 -> 2
+            let t10 = truth[0]; // 0 -> 1
+            let t32 = truth[1]; // 2 -> 3
+            let t21 = truth[2]; // 1 -> 2
             match v {
                 0 => Transform::identity(),
                 1 => invert_rigid(&t10),
