@@ -389,7 +389,19 @@ impl PairMatches {
     /// [`candidates`] from these matches (`source` and `target` as given to
     /// [`PairMatches::new`]).
     pub fn candidates(&self, source: &Features, target: &Features) -> Vec<Candidate> {
-        ransac::candidates(&self.set, source, target, &self.config, &|_| true)
+        let pool = ransac::POOL_PER_CANDIDATE;
+        ransac::candidates(&self.set, source, target, &self.config, &|_| true, pool)
+    }
+
+    /// [`PairMatches::candidates`] for the pair screening of a set of scans: fewer RANSAC
+    /// poses refined ([`ransac::SCREENING_POOL_PER_CANDIDATE`]).
+    pub(crate) fn screening_candidates(
+        &self,
+        source: &Features,
+        target: &Features,
+    ) -> Vec<Candidate> {
+        let pool = ransac::SCREENING_POOL_PER_CANDIDATE;
+        ransac::candidates(&self.set, source, target, &self.config, &|_| true, pool)
     }
 
     /// [`PairMatches::candidates`] searched only among the poses `keep` accepts (maps source
@@ -402,7 +414,8 @@ impl PairMatches {
         keep: &(dyn Fn(&Transform) -> bool + Sync),
     ) -> Vec<Candidate> {
         let keep = |r: &Rigid| keep(&r.to_matrix());
-        ransac::candidates(&self.set, source, target, &self.config, &keep)
+        let pool = ransac::POOL_PER_CANDIDATE;
+        ransac::candidates(&self.set, source, target, &self.config, &keep, pool)
     }
 
     /// Matches that `t_target_source` maps within half the inlier distance, their normals

@@ -15,7 +15,12 @@ const BATCH: usize = 2048;
 /// Distinct hypotheses kept during the search per candidate asked for: refining reorders
 /// them, so more are kept than returned (6 instead of 3 finds a true pose in the top 10 for
 /// one 96-degree turntable pair in 30 more, for twice the refining time).
-const POOL_PER_CANDIDATE: usize = 3;
+pub(super) const POOL_PER_CANDIDATE: usize = 3;
+/// The same for the screening of a set of scans' pairs, where each pair counts less: the
+/// hypotheses of many pairs around loops place a scan. Refining one pose per candidate
+/// instead of three gave the five visible 3DMatch rooms the same placements on three seeds
+/// in 0.75 of the time (RESULTS.md, 2026-12-05, second session).
+pub(super) const SCREENING_POOL_PER_CANDIDATE: usize = 1;
 /// Rounds of refitting on the matches that are inliers of the current pose.
 const MATCH_REFITS: usize = 5;
 /// The ICP's pairing distance shrinks linearly from the inlier distance to this fraction of
@@ -130,13 +135,15 @@ pub(super) fn candidates(
     target: &Features,
     config: &FeatureConfig,
     keep: &(dyn Fn(&Rigid) -> bool + Sync),
+    pool_per_candidate: usize,
 ) -> Vec<Candidate> {
     let matched = &set.matched;
     if matched.len() < 3 {
         return Vec::new();
     }
     let same = |a: &Rigid, b: &Rigid| set.same(a, b, config);
-    let pool = search(matched, config, &same, keep);
+    let capacity = (pool_per_candidate * config.num_candidates).max(10);
+    let pool = search(matched, config, &same, keep, capacity);
     // The refinement pairs keypoints within the inlier distance at most.
     let grid = NearestGrid::new(&target.points, matched.d2.sqrt());
     let mut refined: Vec<Candidate> = pool
@@ -261,18 +268,20 @@ fn nearest_both_ways(source: &[Descriptor], target: &[Descriptor]) -> (Vec<u32>,
     (forward, best_row.into_iter().map(|(_, i)| i).collect())
 }
 
-/// RANSAC over triples of matches: the best distinct hypotheses by score, best first.
+/// RANSAC over triples of matches: the best `capacity` distinct hypotheses by score, best
+/// first.
 fn search(
     matched: &Matched,
     config: &FeatureConfig,
     same: &(impl Fn(&Rigid, &Rigid) -> bool + Sync),
     keep: &(dyn Fn(&Rigid) -> bool + Sync),
+    capacity: usize,
 ) -> Vec<Hypothesis> {
     let m = matched.len();
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
     let mut pool = Pool {
         kept: Vec::new(),
-        capacity: (POOL_PER_CANDIDATE * config.num_candidates).max(10),
+        capacity,
     };
     let mut needed = config.max_iterations;
     let mut done = 0;
