@@ -973,15 +973,12 @@ fn choose(
                     return (None, true);
                 }
                 let pose = Rigid::from_matrix(&pair.poses[best].0);
-                let check = prepared.check_edge(pair.edge, &pose);
                 let trusted = if weighed {
-                    doubts(&[EdgeCheck {
-                        support: Some(top),
-                        rival_support: Some(rival),
-                        ..check
-                    }])[0]
-                        .is_none()
+                    prepared
+                        .check_scene_edge(pair.edge, &pose, top, rival)
+                        .is_some_and(|check| doubts(&[check])[0].is_none())
                 } else {
+                    let check = prepared.check_edge(pair.edge, &pose);
                     check.overlap >= MIN_OVERLAP
                         && check.residual <= MAX_RESIDUAL
                         && check.free_space.is_none_or(|f| f <= HYPOTHESIS_FREE_SPACE)

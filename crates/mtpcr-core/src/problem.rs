@@ -13,7 +13,9 @@ use crate::loss::{CappedDistanceLoss, InlierLoss, Loss};
 use crate::refine::RefineCloud;
 use crate::se3::{translation, Rigid, Transform};
 use crate::search::{IndexedCloud, NearestGrid, SearchMethod};
-use crate::verdict::{check_edge, EdgeCheck, HYPOTHESIS_FREE_SPACE, SEARCH_FREE_SPACE};
+use crate::verdict::{
+    check_edge, EdgeCheck, HYPOTHESIS_FREE_SPACE, MIN_SCENE_LOG_ODDS, SCENE_ODDS, SEARCH_FREE_SPACE,
+};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use std::time::Instant;
@@ -470,6 +472,46 @@ impl PreparedProblem {
             constraint,
             ..surfaces
         }
+    }
+
+    /// [`PreparedProblem::check_edge`] of a pose that `support` descriptor matches and a
+    /// rival `rival` explain, or `None` when its free space, slide constraint and matches
+    /// doubt it whatever its overlap and residual ([`crate::verdict::SceneOdds::at_best`] below
+    /// [`MIN_SCENE_LOG_ODDS`]): then its surfaces, most of a check's time, are not measured.
+    /// With `None` the verdict doubts the pose, as it would have with the full check.
+    pub(crate) fn check_scene_edge(
+        &self,
+        edge: Edge,
+        t: &Rigid,
+        support: usize,
+        rival: usize,
+    ) -> Option<EdgeCheck> {
+        let (free_space, constraint) = rayon::join(
+            || self.free_space_violation(edge.source, edge.target, t),
+            || self.slide_constraint(edge.source, edge.target, t),
+        );
+        let cues = EdgeCheck {
+            source: edge.source,
+            target: edge.target,
+            overlap: 0.0,
+            residual: 0.0,
+            self_residual: 0.0,
+            constraint,
+            support: Some(support),
+            rival_support: Some(rival),
+            free_space,
+        };
+        // Only a pair with free space measured is judged by the weighed cues.
+        if free_space.is_some() && SCENE_ODDS.at_best(&cues) < MIN_SCENE_LOG_ODDS {
+            return None;
+        }
+        let surfaces = check_edge(&self.full, edge, t, self.eps);
+        Some(EdgeCheck {
+            overlap: surfaces.overlap,
+            residual: surfaces.residual,
+            self_residual: surfaces.self_residual,
+            ..cues
+        })
     }
 
     /// [`EdgeCheck::constraint`] of cloud `s` -> cloud `d` at `t` (centred frames): keypoints

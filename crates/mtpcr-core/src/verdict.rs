@@ -135,6 +135,20 @@ impl SceneOdds {
     pub fn log_odds(&self, e: &EdgeCheck) -> f64 {
         self.base + self.terms(e).iter().sum::<f64>()
     }
+    /// The most [`SceneOdds::log_odds`] `e`'s pose can reach whatever its overlap (in
+    /// [0, 1]) and residual (at least 0) turn out to be: a pair below
+    /// [`MIN_SCENE_LOG_ODDS`] by this is doubted before its surfaces are measured.
+    pub fn at_best(&self, e: &EdgeCheck) -> f64 {
+        if self.residual > 0.0 {
+            return f64::INFINITY;
+        }
+        let terms = self.terms(&EdgeCheck {
+            overlap: 0.0,
+            residual: 0.0,
+            ..e.clone()
+        });
+        self.base + terms.iter().sum::<f64>() + self.overlap.max(0.0)
+    }
 }
 
 /// The weights of [`SceneOdds`] (see there).
@@ -568,5 +582,33 @@ mod tests {
         let d = doubts(&edges);
         assert_eq!((d[0].is_some(), d[1].is_some()), (false, false));
         assert!(d[2].as_ref().unwrap().contains("far less closely"), "{d:?}");
+    }
+
+    #[test]
+    fn a_scene_pair_at_best_is_never_below_its_log_odds() {
+        // Whatever the overlap and residual measure, the bound holds, and it is reached.
+        let mut reached = false;
+        for (support, rival, free, constraint) in
+            [(3, 2, 0.2, 0.01), (42, 0, 0.007, 0.11), (8, 6, 0.1, 0.05), (150, 0, 0.0, 0.3)]
+        {
+            let cues = scene(support, rival, free, constraint);
+            let best = SCENE_ODDS.at_best(&cues);
+            for overlap in [0.0, 0.1, 0.48, 1.0] {
+                for residual in [0.0, 0.05, 0.126, 0.25, 3.0] {
+                    let odds = SCENE_ODDS.log_odds(&EdgeCheck {
+                        overlap,
+                        residual,
+                        ..cues.clone()
+                    });
+                    assert!(odds <= best + 1e-12, "{odds} > {best}");
+                    reached |= (odds - best).abs() < 1e-12;
+                }
+            }
+        }
+        assert!(reached);
+        // A pose that few matches explain and that puts a fifth in free space is doubted
+        // whatever its surfaces; the typical confident pair is not.
+        assert!(SCENE_ODDS.at_best(&scene(3, 2, 0.2, 0.01)) < MIN_SCENE_LOG_ODDS);
+        assert!(SCENE_ODDS.at_best(&scene(42, 0, 0.007, 0.11)) >= MIN_SCENE_LOG_ODDS);
     }
 }
