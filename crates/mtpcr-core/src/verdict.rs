@@ -588,9 +588,12 @@ mod tests {
     fn a_scene_pair_at_best_is_never_below_its_log_odds() {
         // Whatever the overlap and residual measure, the bound holds, and it is reached.
         let mut reached = false;
-        for (support, rival, free, constraint) in
-            [(3, 2, 0.2, 0.01), (42, 0, 0.007, 0.11), (8, 6, 0.1, 0.05), (150, 0, 0.0, 0.3)]
-        {
+        for (support, rival, free, constraint) in [
+            (3, 2, 0.2, 0.01),
+            (42, 0, 0.007, 0.11),
+            (8, 6, 0.1, 0.05),
+            (150, 0, 0.0, 0.3),
+        ] {
             let cues = scene(support, rival, free, constraint);
             let best = SCENE_ODDS.at_best(&cues);
             for overlap in [0.0, 0.1, 0.48, 1.0] {
