@@ -459,12 +459,7 @@ impl PreparedProblem {
     pub(crate) fn check_edge(&self, edge: Edge, t: &Rigid) -> EdgeCheck {
         // Independent measures, in the current rayon pool.
         let ((free_space, constraint), surfaces) = rayon::join(
-            || {
-                rayon::join(
-                    || self.free_space_violation(edge.source, edge.target, t),
-                    || self.slide_constraint(edge.source, edge.target, t),
-                )
-            },
+            || self.edge_cues(edge, t),
             || check_edge(&self.full, edge, t, self.eps),
         );
         EdgeCheck {
@@ -472,6 +467,15 @@ impl PreparedProblem {
             constraint,
             ..surfaces
         }
+    }
+
+    /// The free space and slide constraint of `edge` at `t` (centred frames): the measures
+    /// of [`PreparedProblem::check_edge`] beside the surfaces.
+    fn edge_cues(&self, edge: Edge, t: &Rigid) -> (Option<f64>, Option<f64>) {
+        rayon::join(
+            || self.free_space_violation(edge.source, edge.target, t),
+            || self.slide_constraint(edge.source, edge.target, t),
+        )
     }
 
     /// [`PreparedProblem::check_edge`] of a pose that `support` descriptor matches and a
@@ -486,10 +490,7 @@ impl PreparedProblem {
         support: usize,
         rival: usize,
     ) -> Option<EdgeCheck> {
-        let (free_space, constraint) = rayon::join(
-            || self.free_space_violation(edge.source, edge.target, t),
-            || self.slide_constraint(edge.source, edge.target, t),
-        );
+        let (free_space, constraint) = self.edge_cues(edge, t);
         let cues = EdgeCheck {
             source: edge.source,
             target: edge.target,

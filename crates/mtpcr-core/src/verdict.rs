@@ -135,6 +135,7 @@ impl SceneOdds {
     pub fn log_odds(&self, e: &EdgeCheck) -> f64 {
         self.base + self.terms(e).iter().sum::<f64>()
     }
+
     /// The most [`SceneOdds::log_odds`] `e`'s pose can reach whatever its overlap (in
     /// [0, 1]) and residual (at least 0) turn out to be: a pair below
     /// [`MIN_SCENE_LOG_ODDS`] by this is doubted before its surfaces are measured.
