@@ -15,6 +15,10 @@ Usage:
                      the problem is then named <scene>-first<N>
     --force          overwrite existing problem files (otherwise the run refuses, before
                      writing anything)
+    --together NAME  also write NAME.json: every chosen fragment of every chosen scene in one
+                     problem (a set of many scans that are not one room: each scene's frame
+                     lies 1 km from the others', its pairs keep their benchmark sets), to test
+                     a large set and that no fragment of one scene is glued to another
 
 The files follow shared/problems-nview/README.md and what `mtpcr eval` reads
 (Problem::load): `name`, `scans`, `poses` (scan-to-world 4x4, x_world = pose @ [x, 1]), plus
@@ -161,6 +165,41 @@ def check_against_gt_log(prob: dict, gt_log: Path) -> str:
     return f"gt.log: {pairs} pairs agree to {worst:.1e}" if pairs else "gt.log: no pairs among them"
 
 
+def together(name: str, problems: list[dict]) -> dict:
+    """The scenes' problems as one: scans, poses (scene k's frame moved 1000 k m along x, so
+    that no two scenes overlap) and pair sets (as indices of the joined scans)."""
+    joined = {
+        "name": name,
+        "suite": SUITE,
+        "scans": [],
+        "poses": [],
+        "units": "m",
+        "pose_convention": POSE_CONVENTION,
+        "source": (
+            "every fragment of " + ", ".join(p["name"] for p in problems) + "; scene k's poses "
+            "moved 1000 k m along x; written by mtpcr scripts/make_scene_problems.py"
+        ),
+        "fragments": [],
+        "frames": [],
+        "viewpoints": "origin",
+    }
+    sets: dict[str, list] = {}
+    for k, p in enumerate(problems):
+        base = len(joined["scans"])
+        shift = np.eye(4)
+        shift[0, 3] = 1000.0 * k
+        joined["scans"] += p["scans"]
+        joined["poses"] += [(shift @ np.array(q)).tolist() for q in p["poses"]]
+        joined["fragments"] += p["fragments"]
+        joined["frames"] += [f"{p['name']} {f}" for f in p["frames"]]
+        for bench, pairs in p.get("pair_sets", {}).items():
+            sets.setdefault(bench, []).extend([[i + base, j + base] for i, j in pairs])
+    if sets:
+        joined["pair_sets"] = sets
+        joined["pair_success"] = {"degrees": 15.0, "translation": 0.3}
+    return joined
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -170,6 +209,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scenes", help="comma-separated substrings of scene folder names")
     ap.add_argument("--max-fragments", type=int, help="only the first N fragments of each scene")
     ap.add_argument("--force", action="store_true", help="overwrite existing files")
+    ap.add_argument("--together", help="also write every fragment in one problem, NAME.json")
     args = ap.parse_args(argv)
     if args.max_fragments is not None and args.max_fragments < 2:
         ap.error("--max-fragments must be at least 2")
@@ -192,6 +232,8 @@ def main(argv: list[str] | None = None) -> int:
     problems = [scene_problem(d, args.max_fragments) for d in scenes]
     out = Path(args.out).resolve()
     targets = [out / f"{p['name']}.json" for p in problems]
+    if args.together:
+        targets.append(out / f"{args.together}.json")
     existing = [str(t) for t in targets if t.exists()]
     if existing and not args.force:
         raise SystemExit(f"refusing to overwrite (pass --force): {', '.join(existing)}")
@@ -208,6 +250,9 @@ def main(argv: list[str] | None = None) -> int:
             p["pair_success"] = {"degrees": 15.0, "translation": 0.3}
         # each fragment lies in its reference camera's frame: the free-space check's viewpoint
         p["viewpoints"] = "origin"
+    if args.together:
+        problems.append(together(args.together, problems))
+        checks.append(f"{len(scenes)} scenes, 1 km apart")
     out.mkdir(parents=True, exist_ok=True)
     for p, t, check in zip(problems, targets, checks):
         write_json(t, p)

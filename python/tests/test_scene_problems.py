@@ -59,3 +59,37 @@ def test_first_fragments_of_a_scene(tmp_path: Path):
     again = run(*args)
     assert again.returncode != 0 and "refusing to overwrite" in again.stderr
     assert run(*args, "--force").returncode == 0
+
+
+def test_scenes_together_in_one_problem(tmp_path: Path):
+    data = shared_dir() / "data" / "3dmatch"
+    kitchen = data / "7-scenes-redkitchen"
+    if not (data / LAB).is_dir() or not kitchen.is_dir():
+        pytest.skip(f"no 3DMatch lab and kitchen scenes in {data}")
+    done = run(
+        "--out",
+        str(tmp_path),
+        "--data",
+        str(data),
+        "--scenes",
+        "lab_hj,redkitchen",
+        "--max-fragments",
+        "4",
+        "--together",
+        "both",
+    )
+    assert done.returncode == 0, done.stderr
+    kit = json.loads((tmp_path / "7-scenes-redkitchen-first4.json").read_text())
+    lab = json.loads((tmp_path / f"{LAB}-first4.json").read_text())
+    both = json.loads((tmp_path / "both.json").read_text())
+    assert both["scans"] == kit["scans"] + lab["scans"]
+    assert both["viewpoints"] == "origin"
+    poses = np.array(both["poses"])
+    # the first scene as it was; the second moved 1 km along x, rotations untouched
+    assert np.allclose(poses[:4], kit["poses"])
+    moved = np.array(lab["poses"])
+    moved[:, 0, 3] += 1000.0
+    assert np.allclose(poses[4:], moved)
+    for bench, pairs in kit["pair_sets"].items():
+        lab_pairs = [[i + 4, j + 4] for i, j in lab["pair_sets"].get(bench, [])]
+        assert both["pair_sets"][bench] == pairs + lab_pairs

@@ -65,8 +65,9 @@ enum Command {
     ///
     /// Each file is PLY, PCD, E57 (every scan in it is a cloud), LAS/LAZ or XYZ text; a
     /// folder stands for its .ply/.pcd/.e57/.las/.laz/.xyz/.pts files in natural order. Two
-    /// clouds give T12; more give each cloud's pose in cloud 1's frame (with --order given:
-    /// clouds in loop order, T12, T23, ..., Tn1). The folder holds
+    /// clouds give T12; more give each cloud's pose in cloud 1's frame (or, when cloud 1
+    /// cannot be placed, in the first placed cloud's; with --order given: clouds in loop
+    /// order, T12, T23, ..., Tn1). The folder holds
     /// result.json, config.toml (the settings, to repeat the run), transforms.txt, poses.log
     /// (each placed cloud's pose in cloud 1's frame, the 3DMatch/Redwood trajectory format),
     /// pose_graph.json (Open3D's pose graph: open3d.io.read_pose_graph), merged.ply (the

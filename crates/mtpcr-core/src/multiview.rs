@@ -11,7 +11,8 @@
 //!    of several scans join only when the loop through them closes (a second pair, touching
 //!    other scans, agrees: the paper's loop consistency as a verifier, [`place`]); with
 //!    viewpoints, no join may put a scan where a scanner of the other group saw through.
-//!    Scan 0's group is placed, its poses then fitted to every chosen pair that agrees with
+//!    The largest group is placed (in the frame of its first scan: scan 0's when it is in
+//!    it), its poses then fitted to every chosen pair that agrees with
 //!    the placement ([`settle`], a pose graph); chosen pairs that agree with it and overlap
 //!    well are loop closures. Scans outside it are reported unplaced, with the reason.
 //! 4. **Refinement**: the joint ICP of all placed scans over the joining pairs and the
@@ -232,7 +233,7 @@ fn finish(
         // Last round: drop the failing pairs, the scans only they connected to scan 0, and
         // every pair touching such a scan (its reason comes from `failed`).
         used.retain(|&p| failed[p].is_none());
-        let reach = reachable(pairs, &used, n);
+        let reach = reachable(pairs, &used, n, anchor(&start_poses));
         used.retain(|&p| reach[pairs[p].edge.source] && reach[pairs[p].edge.target]);
         let start_poses: Vec<Option<Transform>> = start_poses
             .iter()
@@ -273,10 +274,11 @@ fn finish(
             reason: unplaced_reason(v, pairs, chosen, &rejected, &failed, room),
         })
         .collect();
+    let first = anchor(&refined);
     let poses = refined
         .iter()
         .enumerate()
-        .map(|(v, w)| w.map(|w| prepared.to_original(v, 0, &w)))
+        .map(|(v, w)| w.map(|w| prepared.to_original(v, first, &w)))
         .collect();
     let mut reasons: Vec<String> = unplaced
         .iter()
@@ -428,7 +430,7 @@ fn confirming(
         .collect()
 }
 
-/// The placed scans (other than scan 0) that fewer than two chosen, not rejected pairs put
+/// The placed scans (other than the anchor, see [`anchor`]) that fewer than two chosen, not rejected pairs put
 /// where they are (their chosen pose agrees with the placement to [`CONSENSUS_DEGREES`] and
 /// twice the loop tolerance). Such a scan joined by one pair alone: nothing but that pair
 /// says it is right, and on rooms a strong-looking wrong pair placed a fragment upside down
@@ -445,15 +447,16 @@ fn unconfirmed(
         agreeing[p.source] += 1;
         agreeing[p.target] += 1;
     }
-    (1..placed.len())
-        .filter(|&v| placed[v].is_some() && agreeing[v] < 2)
+    let first = anchor(placed);
+    (0..placed.len())
+        .filter(|&v| v != first && placed[v].is_some() && agreeing[v] < 2)
         .collect()
 }
 
-/// The scans connected to scan 0 through the `used` pairs (`n >= 1`).
-fn reachable(pairs: &[Pair], used: &[usize], n: usize) -> Vec<bool> {
+/// The scans connected to scan `from` through the `used` pairs.
+fn reachable(pairs: &[Pair], used: &[usize], n: usize, from: usize) -> Vec<bool> {
     let mut reach = vec![false; n];
-    if let Some(first) = reach.first_mut() {
+    if let Some(first) = reach.get_mut(from) {
         *first = true;
     }
     let mut grew = true;
@@ -475,8 +478,8 @@ fn reachable(pairs: &[Pair], used: &[usize], n: usize) -> Vec<bool> {
 }
 
 /// Groups of scans joined pair by pair, strongest pair (most descriptor matches) first, from
-/// the chosen, not rejected pairs; the group of scan 0 is placed: its poses (centred, into
-/// scan 0's frame; `None`: not placed) and the pairs used (the joining pairs and agreeing,
+/// the chosen, not rejected pairs; the largest group is placed: its poses (centred, into
+/// the frame of its first scan, see [`anchor`]; `None`: not placed) and the pairs used (the joining pairs and agreeing,
 /// well-overlapping closures), each joining two placed scans.
 ///
 /// A pair joining a single scan to a group joins it. A pair joining two groups of several
@@ -549,16 +552,25 @@ fn place(
         members[a].extend(moved);
         joining.push(p);
     }
-    // Scan 0's group is placed, in scan 0's frame.
+    // The largest group is placed (of equal ones, the one holding the lowest scan), in the
+    // frame of its first scan: a room whose first fragment joins few others is still
+    // assembled (the lab: fragments 1-2 a group that no confirmed pair links to the rest).
     let mut poses: Vec<Option<Transform>> = vec![None; n];
-    if let Some(&first) = group.first() {
-        let to_first = invert_rigid(&frame[0]);
+    let largest = (0..n).max_by(|&a, &b| {
+        members[a]
+            .len()
+            .cmp(&members[b].len())
+            .then(members_min(&members[b]).cmp(&members_min(&members[a])))
+    });
+    if let Some(g) = largest {
+        let anchor = members_min(&members[g]);
+        let to_anchor = invert_rigid(&frame[anchor]);
         for v in 0..n {
-            if v == 0 {
-                // Exactly the identity: scan 0's frame is the output frame.
+            if v == anchor {
+                // Exactly the identity: the anchor's frame is the output frame.
                 poses[v] = Some(Transform::identity());
-            } else if group[v] == first {
-                poses[v] = Some(to_first * frame[v]);
+            } else if group[v] == g {
+                poses[v] = Some(to_anchor * frame[v]);
             }
         }
     }
@@ -593,7 +605,18 @@ fn place(
     (poses, used)
 }
 
-/// The placed scans' poses (centred, into scan 0's frame) fitted to every [`confirming`] pair
+/// The lowest scan of a group (`usize::MAX` for an emptied one, which is never the largest
+/// but for `n == 0`).
+fn members_min(members: &[usize]) -> usize {
+    members.iter().copied().min().unwrap_or(usize::MAX)
+}
+
+/// The scan whose frame the placed poses are in: the first placed one (0 when none is).
+pub(crate) fn anchor(placed: &[Option<Transform>]) -> usize {
+    placed.iter().position(Option::is_some).unwrap_or(0)
+}
+
+/// The placed scans' poses (centred, into the [`anchor`]'s frame) fitted to every [`confirming`] pair
 /// ([`crate::posegraph`]): the placement follows a tree of pairs, whose errors add up across
 /// a room; the pairs closing loops share them out.
 fn settle(
@@ -604,10 +627,10 @@ fn settle(
     tolerance: f64,
 ) -> Vec<Option<Transform>> {
     let relatives = confirming(pairs, chosen, rejected, placed, tolerance);
-    posegraph::fit(placed, &relatives, 0)
+    posegraph::fit(placed, &relatives, anchor(placed))
 }
 
-/// A room's poses (centred, into scan 0's frame) from the settled poses `start` (`None`:
+/// A room's poses (centred, into the [`anchor`]'s frame) from the settled poses `start` (`None`:
 /// not placed): each [`confirming`] pair (at most [`PAIRS_PER_SCAN`] a scan) refined alone
 /// by ICP from the relative pose `start` gives it, then the poses fitted to those refined
 /// pairs ([`posegraph::fit`], weighted by matches). The start poses when refinement is off.
@@ -672,10 +695,10 @@ fn refine_room(
             })
         })
         .collect();
-    posegraph::fit(start, &refined, 0)
+    posegraph::fit(start, &refined, anchor(start))
 }
 
-/// The poses (centred, into scan 0's frame) of the placed scans (`start`; `None`: not
+/// The poses (centred, into the [`anchor`]'s frame) of the placed scans (`start`; `None`: not
 /// placed) after the joint ICP over the `used` pairs (the start poses when refinement is
 /// off). A used pair touching an unplaced scan (none, see [`finish`]) would be left out.
 fn refine_placed(
@@ -1060,7 +1083,7 @@ fn unplaced_reason(
         )
     } else if mine.iter().any(|&p| chosen[p].is_some() && !rejected[p]) {
         format!(
-            "scan {} overlaps others only in a group not connected to scan 1 (no link confirmed by a second pair and clear of the other scanners' free space)",
+            "scan {} overlaps others only in a group not connected to the placed scans, a larger group (no link confirmed by a second pair and clear of the other scanners' free space)",
             v + 1
         )
     } else if mine.iter().any(|&p| chosen[p].is_some()) {
@@ -1153,11 +1176,14 @@ mod tests {
         .unwrap()
     }
 
-    /// Issue 23: verified pairs in a group not connected to scan 1 were kept as spanning-tree
-    /// edges of their own group, so the refinement (and, without it, the measurement) met a
-    /// pair of unplaced scans and panicked (`expect("placed")`).
+    /// Issue 23: verified pairs in a group apart from the placed one were kept as
+    /// spanning-tree edges of their own group, so the refinement (and, without it, the
+    /// measurement) met a pair of unplaced scans and panicked (`expect("placed")`). And the
+    /// larger group is the one placed, in the frame of its first scan, even when scan 1 is
+    /// not in it (the lab: fragments 1-2 a group of their own, the room in others).
     #[test]
-    fn a_verified_group_apart_from_scan_1_is_reported_unplaced() {
+    fn the_largest_group_is_placed_and_the_others_are_reported_unplaced() {
+        let v = views_around(31, 5, 1500);
         for refine_iterations in [20, 0] {
             let config = Config {
                 refine_iterations,
@@ -1170,20 +1196,30 @@ mod tests {
             let chosen = choose(&pairs, &[(0, 1), (2, 3), (3, 4), (2, 4)]);
             let r = run(&prepared, &config, &pairs, &chosen);
             let ends: Vec<(usize, usize)> = r.edges.iter().map(|e| (e.source, e.target)).collect();
-            assert_eq!(ends, [(0, 1)], "refine_iterations {refine_iterations}");
-            assert!(r.poses[0].is_some() && r.poses[1].is_some());
-            assert!(r.poses[2..].iter().all(Option::is_none), "{:?}", r.poses);
+            assert_eq!(
+                ends,
+                [(2, 3), (2, 4), (3, 4)],
+                "refine_iterations {refine_iterations}"
+            );
+            assert!(r.poses[..2].iter().all(Option::is_none), "{:?}", r.poses);
+            assert_eq!(r.poses[2], Some(Transform::identity()));
+            for k in 3..5 {
+                let truth = invert_rigid(&v.poses[2]) * v.poses[k];
+                let pose = r.poses[k].expect("placed");
+                assert!(rotation_error_deg(&pose, &truth) < 0.5, "scan {}", k + 1);
+                assert!(translation_error(&pose, &truth) < 0.01 * prepared.shift());
+            }
             let unplaced: Vec<usize> = r.unplaced.iter().map(|u| u.view).collect();
-            assert_eq!(unplaced, [2, 3, 4]);
+            assert_eq!(unplaced, [0, 1]);
             for u in &r.unplaced {
                 assert!(
                     u.reason.contains(&format!("scan {}", u.view + 1))
-                        && u.reason.contains("not connected to scan 1"),
+                        && u.reason.contains("not connected to the placed scans"),
                     "{}",
                     u.reason
                 );
             }
-            assert_eq!(r.verdict.edges.len(), 1);
+            assert_eq!(r.verdict.edges.len(), 3);
             assert!(!r.verdict.confident);
         }
     }

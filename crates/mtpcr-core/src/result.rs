@@ -47,7 +47,9 @@ pub struct Registration {
     /// T12, T23, T31).
     pub edges: Vec<EdgeEstimate>,
     /// Each view's transform into view 0's frame (`poses[0]` is the identity); ready to merge.
-    /// `None` for a view that could not be placed (see `unplaced`).
+    /// `None` for a view that could not be placed (see `unplaced`). When view 0 itself is not
+    /// placed (scans in no known order: it was not in the largest group of scans that could
+    /// be joined), the frame is that of the first placed view, whose pose is the identity.
     pub poses: Vec<Option<Transform>>,
     /// The views that could not be placed, with the reason (only scans in no known order).
     pub unplaced: Vec<Unplaced>,
@@ -126,14 +128,14 @@ impl Registration {
         Some(invert_rigid(&wt) * ws)
     }
 
-    /// `points` of view `view` mapped into view 0's frame by the view's pose; `None` when
+    /// `points` of view `view` mapped into view 0's frame (see `poses`) by the view's pose; `None` when
     /// the view is unplaced or out of range.
     pub fn place(&self, view: usize, points: &[[f64; 3]]) -> Option<Vec<[f64; 3]>> {
         let pose = Rigid::from_matrix(&(*self.poses.get(view)?)?);
         Some(points.iter().map(|p| pose.apply(p)).collect())
     }
 
-    /// The views' points (`clouds[k]` of view k) merged in view 0's frame, and the view each
+    /// The views' points (`clouds[k]` of view k) merged in view 0's frame (see `poses`), and the view each
     /// point came from; unplaced views are left out. `None` when the number of clouds is not
     /// the number of views.
     pub fn merge(&self, clouds: &[&[[f64; 3]]]) -> Option<(Vec<[f64; 3]>, Vec<usize>)> {

@@ -197,7 +197,9 @@ impl PyRegistration {
         }
     }
 
-    /// Each cloud's transform into cloud 1's frame (``poses[0]`` is the identity), Nx4x4;
+    /// Each cloud's transform into cloud 1's frame (``poses[0]`` is the identity), Nx4x4
+    /// (when cloud 1 is not placed, into the first placed cloud's frame: its pose is the
+    /// identity);
     /// all NaN for a cloud that could not be placed (see ``unplaced``).
     #[getter]
     fn poses<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray3<f64>> {

@@ -155,14 +155,16 @@ impl PoseScores {
     }
 }
 
-/// Scores estimated poses (scan k into scan 0's frame) against ground-truth scan-to-world
-/// poses; `diagonal` scales the translation errors.
+/// Scores estimated poses (scan k into the frame of the first placed scan, scan 0 unless it
+/// is unplaced) against ground-truth scan-to-world poses; `diagonal` scales the translation
+/// errors.
 pub fn score_poses(
     estimate: &[Option<Transform>],
     truth: &[Transform],
     diagonal: f64,
 ) -> PoseScores {
-    let base = invert_rigid(&truth[0]);
+    let first = estimate.iter().position(Option::is_some).unwrap_or(0);
+    let base = invert_rigid(&truth[first.min(truth.len().saturating_sub(1))]);
     let (rot_deg, translation): (Vec<Option<f64>>, Vec<Option<f64>>) = truth
         .iter()
         .enumerate()
@@ -287,8 +289,8 @@ pub fn run_moved_views(
     Ok((result, scores, pairs))
 }
 
-/// Estimated poses of moved clouds (scan k moved into scan 0 moved) carried back to the
-/// clouds as given (`inv(M_0) E_k M_k`), to be scored against the poses as given: a
+/// Estimated poses of moved clouds (scan k moved into the first placed scan a moved) carried
+/// back to the clouds as given (`inv(M_a) E_k M_k`), to be scored against the poses as given: a
 /// translation error is then measured at the scan's own origin (a depth camera's, where the
 /// 3DMatch benchmark measures it), not at its moved frame's origin, up to a scan's size from
 /// its points, where a degree of rotation error adds centimetres. Rotation errors are the
@@ -297,7 +299,8 @@ pub fn poses_as_given(
     estimate: &[Option<Transform>],
     motions: &[Transform],
 ) -> Vec<Option<Transform>> {
-    let Some(first) = motions.first() else {
+    let a = estimate.iter().position(Option::is_some).unwrap_or(0);
+    let Some(first) = motions.get(a) else {
         return Vec::new();
     };
     let to_first = invert_rigid(first);
@@ -380,6 +383,42 @@ mod tests {
             &[Transform::identity()],
         );
         assert!(!off.success && (off.rot_deg[0] - 10.0).abs() < 1e-9);
+    }
+
+    /// With scan 1 unplaced, the poses are in the first placed scan's frame (see
+    /// `multiview::place`) and are scored there, moved or not.
+    #[test]
+    fn poses_without_scan_1_are_scored_in_the_first_placed_scans_frame() {
+        let truth = [
+            decode(&[0.0, 0.0, 0.0, 5.0, 0.0, 0.0]),
+            decode(&[0.0, 30.0, 0.0, 5.0, 1.0, 0.0]),
+            decode(&[90.0, 0.0, 0.0, 0.0, 0.0, 2.0]),
+        ];
+        let into_1 = |k: usize| invert_rigid(&truth[1]) * truth[k];
+        let motions = random_motions(5, 3.0, 3);
+        // What a registration of the moved scans returns: moved scan k into moved scan 1.
+        let moved_estimate: Vec<Option<Transform>> = (0..3)
+            .map(|k| (k > 0).then(|| motions[1] * into_1(k) * invert_rigid(&motions[k])))
+            .collect();
+        let as_given = poses_as_given(&moved_estimate, &motions);
+        assert!(as_given[0].is_none());
+        let scores = score_poses(&as_given, &truth, 1.0);
+        assert_eq!(scores.rot_deg[0], None);
+        for k in 1..3 {
+            assert!(scores.rot_deg[k].unwrap() < 1e-6, "{:?}", scores.rot_deg);
+            assert!(
+                scores.translation[k].unwrap() < 1e-9,
+                "{:?}",
+                scores.translation
+            );
+        }
+        // Scored in scan 0's frame instead, scan 3 would be off.
+        let off = score_poses(
+            &[Some(Transform::identity()), None, as_given[2]],
+            &truth,
+            1.0,
+        );
+        assert!(off.rot_deg[2].unwrap() > 10.0);
     }
 
     #[test]
