@@ -221,7 +221,8 @@ class Registration:
         numbered from 0)."""
     @property
     def poses(self) -> NDArray[np.float64]:
-        """Each cloud into cloud 1's frame (``poses[0]`` is the identity), shape (N, 4, 4);
+        """Each cloud into cloud 1's frame (``poses[0]`` is the identity; see
+        ``reference_cloud`` when cloud 1 is not placed), shape (N, 4, 4);
         all NaN for a cloud that could not be placed."""
     def transform_points(self, cloud: int, points: ArrayLike) -> NDArray[np.float64]:
         """``points`` of cloud ``cloud`` (numbered from 0; an (N, 3) array or anything with
@@ -245,6 +246,10 @@ class Registration:
         """``confident``, ``reasons`` and per pair ``overlap``, ``residual``,
         ``self_residual``, ``constraint`` (how firmly the overlap holds the pose against a
         slide), ``support``, ``rival_support`` and ``free_space`` (None when not measured)."""
+    @property
+    def reference_cloud(self) -> int | None:
+        """The cloud (from 0) whose frame ``poses`` are in: 0, or the first placed cloud when
+        cloud 0 could not be placed; None when none is placed."""
     @property
     def unplaced(self) -> list[dict[str, Any]]:
         """Clouds that could not be placed: dicts with ``cloud`` (from 0) and ``reason``."""

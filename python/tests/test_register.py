@@ -58,6 +58,7 @@ def test_result_is_read_only_and_self_describing(small_views):
     for shape, value in (((4, 4), r.T12), ((3, 4, 4), r.transforms), ((3, 4, 4), r.poses)):
         assert value.shape == shape and value.dtype == np.float64
     np.testing.assert_allclose(r.poses[0], np.eye(4))
+    assert r.reference_cloud == 0
     # Without refinement the loop is not closed: the poses follow two of the three edges
     # (all but the one of highest cost).
     agree = [

@@ -362,6 +362,12 @@ fn register_files(
     for u in &result.unplaced {
         outln!("cloud {} NOT PLACED: {}", u.view + 1, u.reason);
     }
+    if let Some(v) = result.reference_view().filter(|&v| v > 0) {
+        outln!(
+            "poses are in the frame of cloud {} (cloud 1 is not placed)",
+            v + 1
+        );
+    }
     if result.verdict.confident {
         outln!("verdict: confident (every pair overlaps and its surfaces lie on each other)");
     } else {

@@ -292,7 +292,7 @@ pub fn result_json(rec: &RunRecord<'_>) -> serde_json::Value {
         "edges": edges,
         "transforms": transforms,
         "poses": r.poses.iter().map(|p| p.as_ref().map(matrix_rows)).collect::<Vec<_>>(),
-        "poses_note": "poses[k] maps cloud k+1 into the frame of cloud 1; null when the cloud could not be placed",
+        "poses_note": format!("poses[k] maps cloud k+1 into the frame of cloud {}; null when the cloud could not be placed", r.reference_view().map_or(1, |v| v + 1)),
         "unplaced": r.unplaced.iter().map(|u| serde_json::json!({"cloud": u.view + 1, "reason": u.reason})).collect::<Vec<_>>(),
         "loop_residual": r.loop_residual(),
         "best_costs": {
@@ -415,7 +415,8 @@ pub fn write_results(dir: &Path, rec: &RunRecord<'_>) -> CliResult<Vec<String>> 
     let before: Vec<&[[f64; 3]]> = rec.clouds.iter().map(PointCloud::points).collect();
     let after: Vec<&[[f64; 3]]> = moved.iter().map(Vec::as_slice).collect();
     write_atomically(&path("views.png"), |tmp| {
-        plots::views_png(&before, &after, &labels, tmp)
+        let reference = rec.result.reference_view().unwrap_or(0);
+        plots::views_png(&before, &after, reference, &labels, tmp)
     })?;
     // The 3-D view shows the placed scans only (an unplaced one has no "after").
     let placed: Vec<usize> = (0..rec.clouds.len())

@@ -441,11 +441,13 @@ fn subsample(points: &[[f64; 3]], budget: usize) -> impl Iterator<Item = &[f64; 
 const LEGEND_COLUMNS: usize = 4;
 
 /// `views.png`: a 2x2 grid, rows before (each cloud as given, in its own frame) and after
-/// registration (merged in cloud 1's frame), columns two orthographic viewpoints; points
-/// drawn far to near, coloured per view. `labels` name the clouds in the legend.
+/// registration (merged in the frame of cloud `reference`, numbered from 0), columns two
+/// orthographic viewpoints; points drawn far to near, coloured per view. `labels` name the
+/// clouds in the legend.
 pub fn views_png(
     before: &[&[[f64; 3]]],
     after: &[&[[f64; 3]]],
+    reference: usize,
     labels: &[String],
     path: &Path,
 ) -> CliResult<()> {
@@ -463,9 +465,10 @@ pub fn views_png(
         let (grid, legend) =
             root.split_vertically(root.dim_in_pixel().1 as i32 - 50 * legend_rows as i32);
         let panels = grid.split_evenly((2, 2));
+        let merged = format!("after: merged in cloud {}'s frame", reference + 1);
         for (row, (clouds, what)) in [
             (before, "before: as given, each in its own frame"),
-            (after, "after: merged in cloud 1's frame"),
+            (after, merged.as_str()),
         ]
         .into_iter()
         .enumerate()
@@ -633,6 +636,7 @@ mod tests {
         views_png(
             &[&cloud, &cloud, &cloud],
             &[&cloud, &cloud, &cloud],
+            0,
             &labels,
             &dir.join("v.png"),
         )

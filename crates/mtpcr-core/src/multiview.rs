@@ -1203,6 +1203,7 @@ mod tests {
             );
             assert!(r.poses[..2].iter().all(Option::is_none), "{:?}", r.poses);
             assert_eq!(r.poses[2], Some(Transform::identity()));
+            assert_eq!(r.reference_view(), Some(2));
             for k in 3..5 {
                 let truth = invert_rigid(&v.poses[2]) * v.poses[k];
                 let pose = r.poses[k].expect("placed");

@@ -97,6 +97,12 @@ impl Registration {
         self.edges.iter().map(|e| e.t_target_source).collect()
     }
 
+    /// The view whose frame `poses` are in (its pose is the identity): view 0, or the first
+    /// placed view when view 0 could not be placed; `None` when no view is placed.
+    pub fn reference_view(&self) -> Option<usize> {
+        self.poses.iter().position(Option::is_some)
+    }
+
     /// The placed views' poses, or `None` when some view is unplaced.
     pub fn all_poses(&self) -> Option<Vec<Transform>> {
         self.poses.iter().copied().collect()

@@ -295,6 +295,13 @@ impl PyRegistration {
         crate::convert::json_text_to_py(py, &text)
     }
 
+    /// The cloud (numbered from 0) whose frame ``poses`` are in: 0, or the first placed cloud
+    /// when cloud 0 could not be placed; ``None`` when none is placed.
+    #[getter]
+    fn reference_cloud(&self) -> Option<usize> {
+        self.inner.reference_view()
+    }
+
     /// The clouds that could not be placed: dicts with ``cloud`` (numbered from 0) and
     /// ``reason``; empty when every cloud was placed.
     #[getter]
