@@ -132,92 +132,12 @@ pub(crate) fn register_unordered(
         )?,
     };
     prepared.interrupt().check()?;
-    let (mut chosen, mut rejected) = choose(prepared, pool, &pairs);
-    let mut pairs = pairs;
-    let bridge = bridge_groups(
-        prepared,
-        config,
-        pool,
-        &mut pairs,
-        &mut chosen,
-        &mut rejected,
-    )?;
+    let (chosen, rejected) = choose(prepared, pool, &pairs);
     let mut result = finish(
-        prepared, config, pool, &pairs, &chosen, rejected, &bridge, seed, start,
+        prepared, config, pool, &pairs, &chosen, rejected, seed, start,
     )?;
     result.completed = completed;
     Ok(result)
-}
-
-/// Scans are often given in the order they were captured, and neighbours in that order
-/// overlap. Where the placement leaves scans apart (rooms only: scans with viewpoints), each
-/// pair of neighbours in the given order whose scans lie in different groups is registered
-/// as a pair alone is ([`PreparedProblem::pair_alone`]: the pair's full search, its ICP and
-/// the pair verdict, which the screening's quick hypotheses lack); a pair the verdict trusts
-/// becomes a bridge (`true` at its index): its pose replaces the screened ones, and it may
-/// join two groups alone, still clear of free space ([`place`]). A scan that a bridge alone
-/// places leaves the result doubted ([`unconfirmed`]). On the 3DMatch lab (38 fragments,
-/// seed 0) the placement left nine groups along the capture path; the pair search trusts
-/// most of the links between them (fragments 2-3, 13-14, 18-19, 21-22, 27-28, right within
-/// 2 degrees and 10 cm) where the screening chose none or the loop rule refused a lone link.
-fn bridge_groups(
-    prepared: &PreparedProblem,
-    config: &Config,
-    pool: &rayon::ThreadPool,
-    pairs: &mut [Pair],
-    chosen: &mut [Option<usize>],
-    rejected: &mut [bool],
-) -> Result<Vec<bool>> {
-    let n = prepared.clouds().len();
-    let mut bridge = vec![false; pairs.len()];
-    if !prepared.has_viewpoints() {
-        return Ok(bridge);
-    }
-    let clear = join_clear(prepared, pool);
-    let tolerance = loop_tolerance(prepared);
-    let (_, _, group) = place(pairs, chosen, rejected, &bridge, n, tolerance, &clear);
-    let apart: Vec<usize> = (0..pairs.len())
-        .filter(|&p| {
-            let Edge { source, target } = pairs[p].edge;
-            source.abs_diff(target) == 1 && group[source] != group[target]
-        })
-        .collect();
-    let found: Vec<Option<(Rigid, usize, bool)>> = pool.install(|| {
-        apart
-            .par_iter()
-            .map(|&p| prepared.pair_alone(pairs[p].edge, config, pool))
-            .collect::<Result<_>>()
-    })?;
-    prepared.interrupt().check()?;
-    for (&p, found) in apart.iter().zip(found) {
-        if let Some((pose, support, true)) = found {
-            let Edge { source, target } = pairs[p].edge;
-            let overlap = 1.0 - prepared.inlier_loss(source, target).evaluate(&pose);
-            pairs[p].poses = vec![(pose.to_matrix(), overlap)];
-            pairs[p].supports = vec![support];
-            chosen[p] = Some(0);
-            rejected[p] = false;
-            bridge[p] = true;
-        }
-    }
-    Ok(bridge)
-}
-
-/// Whether a join keeps every scan of each group out of the space every scanner of the other
-/// saw through, not only the joining pair's two scans ([`JOIN_FREE_SPACE`]).
-fn join_clear<'a>(
-    prepared: &'a PreparedProblem,
-    pool: &'a rayon::ThreadPool,
-) -> impl Fn(&[Across]) -> bool + 'a {
-    move |across: &[Across]| {
-        pool.install(|| {
-            across.par_iter().all(|(v, u, t_uv)| {
-                prepared
-                    .free_space_share(*v, *u, &Rigid::from_matrix(t_uv))
-                    .is_none_or(|f| f <= JOIN_FREE_SPACE)
-            })
-        })
-    }
 }
 
 /// Placement, refinement and the result, from the screened pairs, the hypothesis chosen for
@@ -236,7 +156,6 @@ fn finish(
     pairs: &[Pair],
     chosen: &[Option<usize>],
     mut rejected: Vec<bool>,
-    bridge: &[bool],
     seed: u64,
     start: std::time::Instant,
 ) -> Result<Registration> {
@@ -248,7 +167,17 @@ fn finish(
         ));
     }
     let tolerance = loop_tolerance(prepared);
-    let clear = join_clear(prepared, pool);
+    // A join must keep every scan of each group out of the space every scanner of the
+    // other saw through, not only the joining pair's two scans.
+    let clear = |across: &[Across]| {
+        pool.install(|| {
+            across.par_iter().all(|(v, u, t_uv)| {
+                prepared
+                    .free_space_share(*v, *u, &Rigid::from_matrix(t_uv))
+                    .is_none_or(|f| f <= JOIN_FREE_SPACE)
+            })
+        })
+    };
     // A room (scans with viewpoints: its pairs chosen by the pair verdict, see [`choose`]) is
     // refined pair by pair, then fitted to its pairs; the scans of an object together, by the
     // joint ICP over the placement's pairs (`used`).
@@ -267,7 +196,7 @@ fn finish(
     let mut round = 0;
     let (used, refined) = loop {
         round += 1;
-        let (placed, mut used, _) = place(pairs, chosen, &rejected, bridge, n, tolerance, &clear);
+        let (placed, mut used) = place(pairs, chosen, &rejected, n, tolerance, &clear);
         let start_poses = settle(pairs, chosen, &rejected, &placed, tolerance);
         let refined = refine(&used, &start_poses, &rejected);
         prepared.interrupt().check()?;
@@ -568,11 +497,10 @@ fn place(
     pairs: &[Pair],
     chosen: &[Option<usize>],
     rejected: &[bool],
-    bridge: &[bool],
     n: usize,
     tolerance: f64,
     clear: &dyn Fn(&[Across]) -> bool,
-) -> (Vec<Option<Transform>>, Vec<usize>, Vec<usize>) {
+) -> (Vec<Option<Transform>>, Vec<usize>) {
     // The chosen, not rejected pairs with their pose and support, most support first.
     let mut order: Vec<(usize, Transform, usize)> = (0..pairs.len())
         .filter(|&p| !rejected[p])
@@ -587,13 +515,7 @@ fn place(
     let mut frame: Vec<Transform> = vec![Transform::identity(); n];
     let mut members: Vec<Vec<usize>> = (0..n).map(|v| vec![v]).collect();
     let mut joining: Vec<usize> = Vec::new();
-    // The chosen pairs first (two groups of several scans joined only by a closed loop), then
-    // the bridges (see [`bridge_groups`]), each of which joins two groups alone.
-    let bridges = order
-        .iter()
-        .filter(|&&(p, _, _)| bridge.get(p).copied().unwrap_or(false));
-    for (k, &(p, t_ts, _)) in order.iter().chain(bridges).enumerate() {
-        let second_pass = k >= order.len();
+    for &(p, t_ts, _) in &order {
         let Edge {
             source: s,
             target: t,
@@ -616,8 +538,7 @@ fn place(
         if !clear(&across) {
             continue;
         }
-        if !second_pass
-            && members[a].len() > 1
+        if members[a].len() > 1
             && members[b].len() > 1
             && !loop_closes(pairs, &order, &group, &frame, (a, b), &t_ab, tolerance)
         {
@@ -681,7 +602,7 @@ fn place(
         }
     }
     used.sort_unstable();
-    (poses, used, group)
+    (poses, used)
 }
 
 /// The lowest scan of a group (`usize::MAX` for an emptied one, which is never the largest
@@ -1249,45 +1170,10 @@ mod tests {
             pairs,
             chosen,
             rejected,
-            &vec![false; pairs.len()],
             0,
             std::time::Instant::now(),
         )
         .unwrap()
-    }
-
-    /// Two groups of two scans linked by one chosen pair stay apart (the loop rule needs a
-    /// second pair); the same pair as a bridge ([`bridge_groups`]) joins them alone.
-    #[test]
-    fn a_bridge_joins_two_groups_alone() {
-        let config = Config {
-            num_threads: 1,
-            ..Config::default()
-        };
-        let (prepared, mut pairs) = problem(31, 4, &config);
-        let chosen = choose(&pairs, &[(0, 1), (2, 3), (1, 2)]);
-        let rejected: Vec<bool> = chosen.iter().map(Option::is_none).collect();
-        let tolerance = loop_tolerance(&prepared);
-        let link = pairs
-            .iter()
-            .position(|p| (p.edge.source, p.edge.target) == (1, 2))
-            .unwrap();
-        // The weakest: both groups have formed when it comes.
-        pairs[link].supports = vec![50];
-        let mut bridge = vec![false; pairs.len()];
-        let (apart, _, group) = place(&pairs, &chosen, &rejected, &bridge, 4, tolerance, &|_| true);
-        assert_eq!(apart.iter().filter(|p| p.is_some()).count(), 2);
-        assert_ne!(group[1], group[2]);
-        bridge[link] = true;
-        let (joined, used, group) =
-            place(&pairs, &chosen, &rejected, &bridge, 4, tolerance, &|_| true);
-        assert!(joined.iter().all(Option::is_some), "{joined:?}");
-        assert!(used.contains(&link) && group[1] == group[2]);
-        // A bridge is still refused where the join is not clear of free space.
-        let (refused, _, _) = place(&pairs, &chosen, &rejected, &bridge, 4, tolerance, &|a| {
-            a.len() == 1
-        });
-        assert_eq!(refused.iter().filter(|p| p.is_some()).count(), 2);
     }
 
     /// Issue 23: verified pairs in a group apart from the placed one were kept as
@@ -1544,16 +1430,7 @@ mod tests {
         // The groups {1, 2} and {3, 4} join through pair 2-3; scans 1 and 3 are touched by
         // no joining pair.
         for (scans, joined) in [((2, 0), false), ((1, 2), false), ((3, 3), true)] {
-            let no_bridge = vec![false; pairs.len()];
-            let (poses, _, _) = place(
-                &pairs,
-                &chosen,
-                &rejected,
-                &no_bridge,
-                4,
-                tolerance,
-                &refusing(scans),
-            );
+            let (poses, _) = place(&pairs, &chosen, &rejected, 4, tolerance, &refusing(scans));
             assert_eq!(poses[3].is_some(), joined, "{scans:?}");
         }
         // The real test, at the true poses: clear.
@@ -1569,7 +1446,6 @@ mod tests {
             &pairs,
             &chosen,
             rejected.to_vec(),
-            &vec![false; pairs.len()],
             0,
             std::time::Instant::now(),
         )
@@ -1599,15 +1475,7 @@ mod tests {
         let chosen = [Some(0); 4];
         let rejected = [false; 4];
         let tolerance = loop_tolerance(&prepared);
-        let (placed, _, _) = place(
-            &pairs,
-            &chosen,
-            &rejected,
-            &vec![false; pairs.len()],
-            4,
-            tolerance,
-            &|_| true,
-        );
+        let (placed, _) = place(&pairs, &chosen, &rejected, 4, tolerance, &|_| true);
         let start = settle(&pairs, &chosen, &rejected, &placed, tolerance);
         let pool = thread_pool(1).unwrap();
         let config = Config {

@@ -7,7 +7,6 @@ use crate::config::{Config, Method};
 use crate::ea::{self, Observer, Outcome, Progress, SearchBox, Tasks};
 use crate::error::{Error, Result};
 use crate::features::PairMatches;
-use crate::graph::Edge;
 use crate::interrupt::Interrupt;
 use crate::loss::Loss;
 use crate::multiview::{best_closing_triple, loop_tolerance, register_unordered};
@@ -19,7 +18,7 @@ use crate::se3::{
     decode, encode, invert_rigid, rotation_error_deg, translation_error, Individual, Rigid,
     Transform,
 };
-use crate::verdict::{doubts, judge, EdgeCheck};
+use crate::verdict::{judge, EdgeCheck};
 use rayon::prelude::*;
 use std::ops::ControlFlow;
 use std::time::Instant;
@@ -202,67 +201,6 @@ impl PreparedProblem {
             eps: self.eps(),
             shift: self.shift(),
         })
-    }
-
-    /// The pair `edge` of this problem registered as a pair alone is (hypotheses searched as
-    /// for a pair, the pose of most support, refined by the pair's ICP, judged by the pair
-    /// verdict), for scans in no known order whose screening left them apart: its pose
-    /// (centred frames, source -> target), the matches it explains, and whether the verdict
-    /// trusts it. `None` without hypotheses.
-    pub(crate) fn pair_alone(
-        &self,
-        edge: Edge,
-        config: &Config,
-        pool: &rayon::ThreadPool,
-    ) -> Result<Option<(Rigid, usize, bool)>> {
-        let (s, t) = (edge.source, edge.target);
-        let Some((matches, found)) =
-            self.pair_hypotheses(s, t, config.hypotheses, HypothesisSearch::Pair)?
-        else {
-            return Ok(None);
-        };
-        let hypotheses = self.clear_of_free_space(s, t, found);
-        // Without generations the search keeps the hypothesis of largest overlap.
-        let loss = self.inlier_loss(s, t);
-        let Some(overlap_best) = hypotheses
-            .iter()
-            .map(|h| (loss.evaluate(h), *h))
-            .min_by(|a, b| a.0.total_cmp(&b.0))
-            .map(|(_, h)| h)
-        else {
-            return Ok(None);
-        };
-        let clearance = |r: &Rigid| self.free_space_clearance(s, t, r);
-        let start = best_supported(&matches, overlap_best, &hypotheses, clearance);
-        let pose = if config.refine_iterations > 0 {
-            let full = self.refine_clouds();
-            let interrupt = self.interrupt();
-            // In the target's frame: the target (first) stays put.
-            let poses = refine_poses(
-                &[&full[t], &full[s]],
-                &[Edge {
-                    source: 1,
-                    target: 0,
-                }],
-                vec![Rigid::from_matrix(&Transform::identity()), start],
-                self.eps(),
-                config.refine_iterations,
-                pool,
-                &|| interrupt.is_set(),
-            );
-            poses.get(1).copied().unwrap_or(start)
-        } else {
-            start
-        };
-        let check = with_support(
-            self.check_edge(edge, &pose),
-            &matches,
-            &pose,
-            &hypotheses,
-            clearance,
-        );
-        let trusted = doubts(&[check])[0].is_none();
-        Ok(Some((pose, matches.support(&pose.to_matrix()), trusted)))
     }
 
     /// Feature hypotheses of every edge (`hypotheses`, centred poses), for both of its
