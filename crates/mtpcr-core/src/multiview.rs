@@ -611,7 +611,8 @@ fn members_min(members: &[usize]) -> usize {
     members.iter().copied().min().unwrap_or(usize::MAX)
 }
 
-/// The scan whose frame the placed poses are in: the first placed one (0 when none is).
+/// The scan whose frame the placed poses are in: the first placed one (0 when none is; also
+/// how `mtpcr eval` scores them).
 pub(crate) fn anchor(placed: &[Option<Transform>]) -> usize {
     placed.iter().position(Option::is_some).unwrap_or(0)
 }

@@ -6,6 +6,7 @@ use crate::cloud::PointCloud;
 use crate::config::Config;
 use crate::error::Result;
 use crate::graph::ViewGraph;
+use crate::multiview::anchor;
 use crate::register::register;
 use crate::result::Registration;
 use crate::se3::{
@@ -163,7 +164,7 @@ pub fn score_poses(
     truth: &[Transform],
     diagonal: f64,
 ) -> PoseScores {
-    let first = estimate.iter().position(Option::is_some).unwrap_or(0);
+    let first = anchor(estimate);
     let base = invert_rigid(&truth[first.min(truth.len().saturating_sub(1))]);
     let (rot_deg, translation): (Vec<Option<f64>>, Vec<Option<f64>>) = truth
         .iter()
@@ -299,7 +300,7 @@ pub fn poses_as_given(
     estimate: &[Option<Transform>],
     motions: &[Transform],
 ) -> Vec<Option<Transform>> {
-    let a = estimate.iter().position(Option::is_some).unwrap_or(0);
+    let a = anchor(estimate);
     let Some(first) = motions.get(a) else {
         return Vec::new();
     };
