@@ -556,14 +556,16 @@ fn place(
     // frame of its first scan: a room whose first fragment joins few others is still
     // assembled (the lab: fragments 1-2 a group that no confirmed pair links to the rest).
     let mut poses: Vec<Option<Transform>> = vec![None; n];
-    let largest = (0..n).max_by(|&a, &b| {
-        members[a]
-            .len()
-            .cmp(&members[b].len())
-            .then(members_min(&members[b]).cmp(&members_min(&members[a])))
-    });
-    if let Some(g) = largest {
-        let anchor = members_min(&members[g]);
+    // Scans in order: the first scan of a strictly larger group takes over, so the anchor is
+    // the lowest scan of the largest group.
+    let mut largest: Option<usize> = None;
+    for v in 0..n {
+        if largest.is_none_or(|a| members[group[v]].len() > members[group[a]].len()) {
+            largest = Some(v);
+        }
+    }
+    if let Some(anchor) = largest {
+        let g = group[anchor];
         let to_anchor = invert_rigid(&frame[anchor]);
         for v in 0..n {
             if v == anchor {
@@ -603,12 +605,6 @@ fn place(
     }
     used.sort_unstable();
     (poses, used)
-}
-
-/// The lowest scan of a group (`usize::MAX` for an emptied one, which is never the largest
-/// but for `n == 0`).
-fn members_min(members: &[usize]) -> usize {
-    members.iter().copied().min().unwrap_or(usize::MAX)
 }
 
 /// The scan whose frame the placed poses are in: the first placed one (0 when none is; also
