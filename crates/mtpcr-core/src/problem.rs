@@ -45,6 +45,10 @@ pub struct PreparedProblem {
     aiding_cap_ratio: f64,
     /// Keypoint features of each centred full-resolution cloud (only with hypotheses).
     features: Option<(FeatureConfig, Vec<Features>)>,
+    /// A pair's two centred full-resolution clouds (only for a pair with hypotheses): the
+    /// second look of a doubted pair describes them again at finer keypoints
+    /// ([`PreparedProblem::pair_hypotheses_finer`]).
+    pair_points: Option<Vec<Vec<[f64; 3]>>>,
     /// What each scanner saw through (centred frames); empty when no scan has a viewpoint.
     free_space: Vec<FreeSpace>,
     feature_voxel_ratio: f64,
@@ -52,6 +56,12 @@ pub struct PreparedProblem {
     interrupt: Interrupt,
     seconds: f64,
 }
+
+/// The second look of a doubted pair describes its scans at keypoints this many times as far
+/// apart as the first look's ([`PreparedProblem::pair_hypotheses_finer`]). Finer keypoints
+/// alone register about as many pairs (3DMatch more, 3DLoMatch fewer), but they register
+/// others: RESULTS.md, 2026-12-05, fourth session.
+pub(crate) const FINER_KEYPOINTS: f64 = 0.75;
 
 /// Keypoints of two scans meet (for [`PreparedProblem::slide_constraint`]) within this many
 /// keypoint voxels...
@@ -199,7 +209,7 @@ impl PreparedProblem {
                 .collect()
         });
         interrupt.check()?;
-        let features = if config.hypotheses > 0 {
+        let (features, pair_points) = if config.hypotheses > 0 {
             let full: Vec<Vec<[f64; 3]>> = clouds
                 .iter()
                 .zip(&centroids)
@@ -219,9 +229,10 @@ impl PreparedProblem {
                     .map(|c| describe(c, &feature_config))
                     .collect::<Result<_>>()
             })?;
-            Some((feature_config, described))
+            let kept = (clouds.len() == 2).then_some(full);
+            (Some((feature_config, described)), kept)
         } else {
-            None
+            (None, None)
         };
         let free_space = if clouds.iter().any(|c| c.viewpoint().is_some()) {
             pool.install(|| {
@@ -252,6 +263,7 @@ impl PreparedProblem {
             search,
             aiding_cap_ratio: config.aiding_cap_ratio,
             features,
+            pair_points,
             feature_voxel_ratio: config.feature_voxel_ratio,
             interrupt,
             seconds: start.elapsed().as_secs_f64(),
@@ -387,6 +399,62 @@ impl PreparedProblem {
         let Some((config, features)) = &self.features else {
             return Ok(None);
         };
+        self.hypotheses_from(
+            source,
+            target,
+            (&features[source], &features[target]),
+            config,
+            count,
+            search,
+        )
+        .map(Some)
+    }
+
+    /// [`PreparedProblem::pair_hypotheses`] of a pair from keypoints [`FINER_KEYPOINTS`] times
+    /// as far apart as the first ones, described anew: the second look of a pair the verdict
+    /// doubts. `None` without hypotheses or for more than two clouds.
+    pub(crate) fn pair_hypotheses_finer(
+        &self,
+        source: usize,
+        target: usize,
+        count: usize,
+        pool: &rayon::ThreadPool,
+    ) -> Result<Option<(PairMatches, Vec<Rigid>)>> {
+        let (Some((first, _)), Some(points)) = (&self.features, &self.pair_points) else {
+            return Ok(None);
+        };
+        let config = FeatureConfig::for_spacing(first.voxel * FINER_KEYPOINTS);
+        config.validate()?;
+        let described: Vec<Features> = pool.install(|| {
+            use rayon::prelude::*;
+            [source, target]
+                .par_iter()
+                .map(|&v| describe(&points[v], &config))
+                .collect::<Result<_>>()
+        })?;
+        self.interrupt.check()?;
+        self.hypotheses_from(
+            source,
+            target,
+            (&described[0], &described[1]),
+            &config,
+            count,
+            HypothesisSearch::Pair,
+        )
+        .map(Some)
+    }
+
+    /// The matches of two scans' `features` (`config`) and their `count` best poses (centred
+    /// frames, source -> target) found as `search` says.
+    fn hypotheses_from(
+        &self,
+        source: usize,
+        target: usize,
+        (s, t): (&Features, &Features),
+        config: &FeatureConfig,
+        count: usize,
+        search: HypothesisSearch,
+    ) -> Result<(PairMatches, Vec<Rigid>)> {
         let consensus_seeds = match search {
             HypothesisSearch::Pair => config.consensus_seeds,
             HypothesisSearch::Screening => 0,
@@ -396,7 +464,6 @@ impl PreparedProblem {
             consensus_seeds,
             ..config.clone()
         };
-        let (s, t) = (&features[source], &features[target]);
         let matches = PairMatches::new(s, t, &config)?;
         let candidates = if search == HypothesisSearch::Pair && !self.free_space.is_empty() {
             // The search keeps room only for poses that can be right.
@@ -418,7 +485,7 @@ impl PreparedProblem {
             .iter()
             .map(|c| Rigid::from_matrix(&c.t_target_source))
             .collect();
-        Ok(Some((matches, poses)))
+        Ok((matches, poses))
     }
 
     /// Whether any scan's viewpoint is known (free space is measured).

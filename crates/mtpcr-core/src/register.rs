@@ -7,6 +7,7 @@ use crate::config::{Config, Method};
 use crate::ea::{self, Observer, Outcome, Progress, SearchBox, Tasks};
 use crate::error::{Error, Result};
 use crate::features::PairMatches;
+use crate::graph::Edge;
 use crate::interrupt::Interrupt;
 use crate::loss::Loss;
 use crate::multiview::{best_closing_triple, loop_tolerance, register_unordered};
@@ -18,7 +19,7 @@ use crate::se3::{
     decode, encode, invert_rigid, rotation_error_deg, translation_error, Individual, Rigid,
     Transform,
 };
-use crate::verdict::{judge, EdgeCheck};
+use crate::verdict::{doubts, judge, EdgeCheck, SCENE_ODDS};
 use rayon::prelude::*;
 use std::ops::ControlFlow;
 use std::time::Instant;
@@ -116,32 +117,54 @@ impl PreparedProblem {
                 evolved[0] = best_supported(m, evolved[0], &hypotheses[0], clearance);
             }
         }
-        let (centred, refined_poses) = if config.refine_iterations > 0 {
-            let poses = self.refine_centred(&evolved, config.refine_iterations, &pool)?;
-            let pairs = graph
-                .edges()
-                .iter()
-                .map(|e| {
-                    let t =
-                        invert_rigid(&poses[e.target].to_matrix()) * poses[e.source].to_matrix();
-                    Rigid::from_matrix(&t)
-                })
-                .collect();
-            (pairs, Some(poses))
-        } else {
-            (evolved, None)
-        };
+        let (mut centred, mut refined_poses) = self.refined(evolved, config, &pool)?;
+        // A pair alone: the verdict's measures of its answer (with its feature support). One
+        // that the verdict doubts gets a second look at finer keypoints, whose answer
+        // replaces the first when the verdict trusts it more (with viewpoints only, where the
+        // verdict weighs a scene pair's cues into odds that compare two answers).
+        let mut pair_measures = None;
+        let mut looked_again = false;
+        if let (1, Some(m)) = (edges, &matches[0]) {
+            let e = graph.edges()[0];
+            // In the pool: the measures and the second look run in parallel.
+            pool.install(|| -> Result<()> {
+                let mut measures = self.pair_check(e, &centred[0], m, &hypotheses[0]);
+                if self.has_viewpoints() && doubts(std::slice::from_ref(&measures))[0].is_some() {
+                    if let Some(look) = self.second_look(e, config, &pool)? {
+                        if SCENE_ODDS.log_odds(&look.measures) > SCENE_ODDS.log_odds(&measures) {
+                            centred[0] = look.pose;
+                            refined_poses = look.poses;
+                            measures = look.measures;
+                            looked_again = true;
+                        }
+                    }
+                }
+                pair_measures = Some(measures);
+                Ok(())
+            })?;
+        }
         let costs = &out.best_costs;
         let estimates: Vec<EdgeEstimate> = graph
             .edges()
             .iter()
             .enumerate()
-            .map(|(k, e)| EdgeEstimate {
-                source: e.source,
-                target: e.target,
-                t_target_source: self.to_original(e.source, e.target, &centred[k].to_matrix()),
-                original_cost: costs[edges + k],
-                aiding_cost: costs[k],
+            .map(|(k, e)| {
+                let (original_cost, aiding_cost) = if looked_again {
+                    (
+                        self.inlier_loss(e.source, e.target).evaluate(&centred[k]),
+                        self.aiding_loss(k, config.two_way_aiding)
+                            .evaluate(&centred[k]),
+                    )
+                } else {
+                    (costs[edges + k], costs[k])
+                };
+                EdgeEstimate {
+                    source: e.source,
+                    target: e.target,
+                    t_target_source: self.to_original(e.source, e.target, &centred[k].to_matrix()),
+                    original_cost,
+                    aiding_cost,
+                }
             })
             .collect();
         let poses = match refined_poses {
@@ -159,18 +182,13 @@ impl PreparedProblem {
                 .edges()
                 .iter()
                 .zip(&centred)
-                .zip(matches.iter().zip(&hypotheses))
-                .map(|((e, t), (m, h))| {
-                    let check = self.check_edge(*e, t);
-                    // A pair alone has nothing else to verify it; in a loop, the loop does (an
-                    // edge found through the loop may explain fewer matches than a wrong pose).
-                    match m {
-                        Some(m) if edges == 1 => {
-                            let clearance =
-                                |r: &Rigid| self.free_space_clearance(e.source, e.target, r);
-                            with_support(check, m, t, h, clearance)
-                        }
-                        _ => check,
+                .map(|(e, t)| {
+                    // A pair alone has nothing else to verify it than its feature support; in
+                    // a loop, the loop does (an edge found through the loop may explain fewer
+                    // matches than a wrong pose).
+                    match &pair_measures {
+                        Some(measures) => measures.clone(),
+                        None => self.check_edge(*e, t),
                     }
                 })
                 .collect()
@@ -201,6 +219,82 @@ impl PreparedProblem {
             eps: self.eps(),
             shift: self.shift(),
         })
+    }
+
+    /// The joint ICP of `evolved` (edge order, centred frames) when `config` refines: the
+    /// refined pose of every edge and of every view (view 0's centred frame); otherwise
+    /// `evolved` as it is.
+    fn refined(
+        &self,
+        evolved: Vec<Rigid>,
+        config: &Config,
+        pool: &rayon::ThreadPool,
+    ) -> Result<(Vec<Rigid>, Option<Vec<Rigid>>)> {
+        if config.refine_iterations == 0 {
+            return Ok((evolved, None));
+        }
+        let poses = self.refine_centred(&evolved, config.refine_iterations, pool)?;
+        let pairs = self
+            .graph()
+            .edges()
+            .iter()
+            .map(|e| {
+                let t = invert_rigid(&poses[e.target].to_matrix()) * poses[e.source].to_matrix();
+                Rigid::from_matrix(&t)
+            })
+            .collect();
+        Ok((pairs, Some(poses)))
+    }
+
+    /// The verdict's measures of a pair alone at pose `t` (centred), with the feature
+    /// support of `t` and of its best rival among the `hypotheses` of `matches`.
+    fn pair_check(
+        &self,
+        e: Edge,
+        t: &Rigid,
+        matches: &PairMatches,
+        hypotheses: &[Rigid],
+    ) -> EdgeCheck {
+        let clearance = |r: &Rigid| self.free_space_clearance(e.source, e.target, r);
+        with_support(self.check_edge(e, t), matches, t, hypotheses, clearance)
+    }
+
+    /// The second look at a pair (`e`, the problem's only edge) that the verdict doubts: its
+    /// hypotheses from finer keypoints ([`PreparedProblem::pair_hypotheses_finer`]), the one
+    /// of most support chosen and refined as the first look's are; `None` without
+    /// hypotheses.
+    fn second_look(
+        &self,
+        e: Edge,
+        config: &Config,
+        pool: &rayon::ThreadPool,
+    ) -> Result<Option<Look>> {
+        let (s, t) = (e.source, e.target);
+        let Some((matches, found)) = self.pair_hypotheses_finer(s, t, config.hypotheses, pool)?
+        else {
+            return Ok(None);
+        };
+        let hypotheses = self.clear_of_free_space(s, t, found);
+        // As without generations in the first look: the hypothesis of largest overlap,
+        // then the one of most support.
+        let loss = self.inlier_loss(s, t);
+        let Some(largest_overlap) = hypotheses
+            .iter()
+            .map(|h| (loss.evaluate(h), *h))
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+            .map(|(_, h)| h)
+        else {
+            return Ok(None);
+        };
+        let clearance = |r: &Rigid| self.free_space_clearance(s, t, r);
+        let start = best_supported(&matches, largest_overlap, &hypotheses, clearance);
+        let (pose, poses) = self.refined(vec![start], config, pool)?;
+        let measures = self.pair_check(e, &pose[0], &matches, &hypotheses);
+        Ok(Some(Look {
+            pose: pose[0],
+            poses,
+            measures,
+        }))
     }
 
     /// Feature hypotheses of every edge (`hypotheses`, centred poses), for both of its
@@ -363,6 +457,16 @@ impl PreparedProblem {
             .unwrap_or(0);
         self.graph().ring_poses(&t, worst)
     }
+}
+
+/// A pair's answer from [`PreparedProblem::second_look`].
+struct Look {
+    /// The pair's pose (centred frames, source -> target).
+    pose: Rigid,
+    /// Every view's refined pose, as [`PreparedProblem::refined`] gives them.
+    poses: Option<Vec<Rigid>>,
+    /// The verdict's measures of `pose`.
+    measures: EdgeCheck,
 }
 
 /// Of `evolved` and the `hypotheses` of a pair (centred poses), the one with the most

@@ -138,3 +138,38 @@ fn on_3dlomatch_pairs_right_poses_keep_out_of_free_space_and_wrong_ones_do_not()
         "{free:?}"
     );
 }
+
+/// Three 3DLoMatch pairs whose first look (keypoints 2 % of the scans' size apart) ends on a
+/// wrong pose, 94-174 degrees off, that the verdict doubts: the second look at finer
+/// keypoints registers each of them, and the verdict trusts its answer.
+#[test]
+#[cfg_attr(
+    not(shared_data),
+    ignore = "needs ../shared (or MTPCR_SHARED_DIR), not found at build time"
+)]
+fn a_doubted_3dlomatch_pair_is_registered_by_the_second_look() {
+    use mtpcr_core::eval::pairs::{run_benchmark, PairBenchmark};
+    use std::ops::ControlFlow;
+    let dir = common::shared_dir().join("data/3dmatch/benchmarks/3DLoMatch");
+    let mut benchmark = PairBenchmark::load(&dir, None).unwrap_or_else(|e| panic!("{e}"));
+    let wanted = [
+        "7-scenes-redkitchen/11-29",
+        "sun3d-home_at-home_at_scan1_2013_jan_1/17-19",
+        "sun3d-home_at-home_at_scan1_2013_jan_1/38-40",
+    ];
+    benchmark
+        .cases
+        .retain(|c| wanted.contains(&c.key().as_str()));
+    assert_eq!(
+        benchmark.cases.len(),
+        wanted.len(),
+        "pairs missing from the benchmark"
+    );
+    let records = run_benchmark(&benchmark, &Config::default(), 0, false, &[], &mut |_| {
+        ControlFlow::Continue(())
+    })
+    .unwrap_or_else(|e| panic!("{e}"));
+    for r in &records {
+        assert!(r.registered && r.confident, "{r:#?}");
+    }
+}
