@@ -123,7 +123,8 @@ impl PreparedProblem {
         // replaces the first when the verdict trusts it more (with viewpoints only, where the
         // verdict weighs a scene pair's cues into odds that compare two answers).
         let mut pair_measures = None;
-        let mut looked_again = false;
+        // The second look's pose before refinement, when its answer is kept.
+        let mut second_start = None;
         if let (1, Some(m)) = (edges, &matches[0]) {
             let e = graph.edges()[0];
             // In the pool: the measures and the second look run in parallel.
@@ -135,7 +136,7 @@ impl PreparedProblem {
                             centred[0] = look.pose;
                             refined_poses = look.poses;
                             measures = look.measures;
-                            looked_again = true;
+                            second_start = Some(look.start);
                         }
                     }
                 }
@@ -149,11 +150,11 @@ impl PreparedProblem {
             .iter()
             .enumerate()
             .map(|(k, e)| {
-                let (original_cost, aiding_cost) = if looked_again {
+                // The costs before refinement, as the search's.
+                let (original_cost, aiding_cost) = if let Some(start) = &second_start {
                     (
-                        self.inlier_loss(e.source, e.target).evaluate(&centred[k]),
-                        self.aiding_loss(k, config.two_way_aiding)
-                            .evaluate(&centred[k]),
+                        self.inlier_loss(e.source, e.target).evaluate(start),
+                        self.aiding_loss(k, config.two_way_aiding).evaluate(start),
                     )
                 } else {
                     (costs[edges + k], costs[k])
@@ -291,6 +292,7 @@ impl PreparedProblem {
         let (pose, poses) = self.refined(vec![start], config, pool)?;
         let measures = self.pair_check(e, &pose[0], &matches, &hypotheses);
         Ok(Some(Look {
+            start,
             pose: pose[0],
             poses,
             measures,
@@ -461,6 +463,8 @@ impl PreparedProblem {
 
 /// A pair's answer from [`PreparedProblem::second_look`].
 struct Look {
+    /// The pair's pose before refinement (centred frames, source -> target).
+    start: Rigid,
     /// The pair's pose (centred frames, source -> target).
     pose: Rigid,
     /// Every view's refined pose, as [`PreparedProblem::refined`] gives them.
