@@ -141,7 +141,8 @@ fn on_3dlomatch_pairs_right_poses_keep_out_of_free_space_and_wrong_ones_do_not()
 
 /// Three 3DLoMatch pairs whose first look (keypoints 2 % of the scans' size apart) ends on a
 /// wrong pose, 94-174 degrees off, that the verdict doubts: the second look at finer
-/// keypoints registers each of them, and the verdict trusts its answer.
+/// keypoints registers each of them, and the verdict trusts its answer, whatever the number
+/// of threads.
 #[test]
 #[cfg_attr(
     not(shared_data),
@@ -165,11 +166,22 @@ fn a_doubted_3dlomatch_pair_is_registered_by_the_second_look() {
         wanted.len(),
         "pairs missing from the benchmark"
     );
-    let records = run_benchmark(&benchmark, &Config::default(), 0, false, &[], &mut |_| {
-        ControlFlow::Continue(())
-    })
-    .unwrap_or_else(|e| panic!("{e}"));
+    let run = |num_threads: usize| {
+        let config = Config {
+            num_threads,
+            ..Config::default()
+        };
+        run_benchmark(&benchmark, &config, 0, false, &[], &mut |_| {
+            ControlFlow::Continue(())
+        })
+        .unwrap_or_else(|e| panic!("{e}"))
+    };
+    let records = run(2);
     for r in &records {
         assert!(r.registered && r.confident, "{r:#?}");
     }
+    // The second look, like the first, gives the same poses on any number of threads.
+    let one_thread: Vec<_> = run(1).iter().map(|r| r.t_target_source).collect();
+    let two_threads: Vec<_> = records.iter().map(|r| r.t_target_source).collect();
+    assert_eq!(one_thread, two_threads);
 }
