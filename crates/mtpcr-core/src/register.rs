@@ -127,7 +127,7 @@ impl PreparedProblem {
         let mut second_start = None;
         if let (1, Some(m)) = (edges, &matches[0]) {
             let e = graph.edges()[0];
-            // In the pool: the measures and the second look run in parallel.
+            // In the pool: the measures and the second look use its threads (`num_threads`).
             pool.install(|| -> Result<()> {
                 let mut measures = self.pair_check(e, &centred[0], m, &hypotheses[0]);
                 if self.has_viewpoints() && doubts(std::slice::from_ref(&measures))[0].is_some() {
