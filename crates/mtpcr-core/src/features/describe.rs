@@ -28,8 +28,9 @@ pub(super) fn describe(points: &[[f64; 3]], config: &FeatureConfig) -> Features 
     let Ok(tree) = ImmutableKdTree::<f64, 3>::new_from_slice(&keypoints) else {
         return Features::default();
     };
-    let normals = normals(&tree, &keypoints, config);
-    let descriptors = fpfh(&tree, &keypoints, &normals, config);
+    let near = neighbourhoods(&tree, &keypoints, config);
+    let normals = normals(&keypoints, &near, config);
+    let descriptors = fpfh(&keypoints, &near, &normals, config);
     let mut out = Features::default();
     for ((p, n), d) in keypoints.iter().zip(&normals).zip(descriptors) {
         if let (Some(n), Some(d)) = (n, d) {
@@ -126,16 +127,56 @@ pub fn pca_diagonal(points: &[[f64; 3]]) -> f64 {
     (0..3).map(|k| (hi[k] - lo[k]).powi(2)).sum::<f64>().sqrt()
 }
 
+/// Each keypoint's neighbours (index, squared distance; itself included), nearest first:
+/// those within the larger of the normals' and the features' radius, at most the larger of
+/// their counts. One query serves both: each takes the prefix it needs ([`within`]).
+fn neighbourhoods(
+    tree: &ImmutableKdTree<f64, 3>,
+    points: &[[f64; 3]],
+    config: &FeatureConfig,
+) -> Vec<Vec<(u32, f64)>> {
+    let most = config
+        .normal_max_neighbours
+        .max(config.feature_max_neighbours);
+    let k = NonZero::new(most).expect("validated >= 3");
+    let r = config.normal_radius.max(config.feature_radius);
+    points
+        .par_iter()
+        .with_min_len(64)
+        .map(|p| {
+            tree.query(p)
+                .nearest_n::<SquaredEuclidean<f64>>(k)
+                .within(r * r)
+                .execute()
+                .iter()
+                .map(|r| (r.item as u32, r.distance))
+                .collect()
+        })
+        .collect()
+}
+
+/// The nearest `count` of a keypoint's `neighbourhood` within `radius`: what a query for them
+/// alone finds, as the neighbourhood holds at least as many, nearest first.
+fn within(
+    neighbourhood: &[(u32, f64)],
+    radius: f64,
+    count: usize,
+) -> impl Iterator<Item = &(u32, f64)> + Clone {
+    let r2 = radius * radius;
+    neighbourhood
+        .iter()
+        .take_while(move |(_, d2)| *d2 <= r2)
+        .take(count)
+}
+
 /// The unit normal of each keypoint from a plane fit over its neighbours within
 /// `normal_radius` (at most `normal_max_neighbours`, itself included), signed by
 /// `orientation`; `None` with fewer than three neighbours.
 fn normals(
-    tree: &ImmutableKdTree<f64, 3>,
     points: &[[f64; 3]],
+    near: &[Vec<(u32, f64)>],
     config: &FeatureConfig,
 ) -> Vec<Option<[f64; 3]>> {
-    let k = NonZero::new(config.normal_max_neighbours).expect("validated >= 3");
-    let r2 = config.normal_radius * config.normal_radius;
     let centroid = points
         .iter()
         .fold(Vector3::zeros(), |a, p| a + Vector3::from(*p))
@@ -146,17 +187,14 @@ fn normals(
     };
     points
         .par_iter()
+        .zip(near)
         .with_min_len(64)
-        .map(|p| {
-            let nn = tree
-                .query(p)
-                .nearest_n::<SquaredEuclidean<f64>>(k)
-                .within(r2)
-                .execute();
-            if nn.len() < 3 {
+        .map(|(p, hood)| {
+            let nn = || within(hood, config.normal_radius, config.normal_max_neighbours);
+            if nn().count() < 3 {
                 return None;
             }
-            let mut n = plane_fit(nn.iter().map(|r| &points[r.item as usize])).normal;
+            let mut n = plane_fit(nn().map(|&(j, _)| &points[j as usize])).normal;
             if !n.iter().all(|c| c.is_finite()) {
                 return None;
             }
@@ -171,29 +209,23 @@ fn normals(
 /// The FPFH of each keypoint with a normal and at least one neighbour with a normal within
 /// `feature_radius` (at most `feature_max_neighbours` points, itself included).
 fn fpfh(
-    tree: &ImmutableKdTree<f64, 3>,
     points: &[[f64; 3]],
+    near: &[Vec<(u32, f64)>],
     normals: &[Option<[f64; 3]>],
     config: &FeatureConfig,
 ) -> Vec<Option<Descriptor>> {
-    let k = NonZero::new(config.feature_max_neighbours).expect("validated >= 1");
-    let r2 = config.feature_radius * config.feature_radius;
     // Neighbours (index, distance) of each keypoint with a normal, itself excluded.
-    let neighbours: Vec<Vec<(u32, f64)>> = points
+    let neighbours: Vec<Vec<(u32, f64)>> = near
         .par_iter()
         .with_min_len(64)
         .enumerate()
-        .map(|(i, p)| {
+        .map(|(i, hood)| {
             if normals[i].is_none() {
                 return Vec::new();
             }
-            tree.query(p)
-                .nearest_n::<SquaredEuclidean<f64>>(k)
-                .within(r2)
-                .execute()
-                .iter()
-                .filter(|r| r.item as usize != i && normals[r.item as usize].is_some())
-                .map(|r| (r.item, r.distance.sqrt()))
+            within(hood, config.feature_radius, config.feature_max_neighbours)
+                .filter(|&&(j, _)| j as usize != i && normals[j as usize].is_some())
+                .map(|&(j, d2)| (j, d2.sqrt()))
                 .collect()
         })
         .collect();
