@@ -149,7 +149,7 @@ fn neighbourhoods(
                 .within(r * r)
                 .execute()
                 .iter()
-                .map(|r| (r.item as u32, r.distance))
+                .map(|r| (r.item, r.distance))
                 .collect()
         })
         .collect()
