@@ -346,3 +346,59 @@ pub(super) fn pair_features(
     let theta = w.dot(&n_other).atan2(u.dot(&n_other));
     [theta, alpha, phi]
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{RngExt, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    /// The normal and the FPFH each take a prefix of one neighbourhood query; each prefix must
+    /// be what a query of its own radius and count finds, in the same order (the plane fit and
+    /// the histogram sums depend on it).
+    #[test]
+    fn a_neighbourhood_prefix_is_what_its_own_query_finds() {
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        // A wavy sheet (a surface, as scans are) and scattered points.
+        // Dense enough that both counts bind somewhere (about 250 points within the FPFH
+        // radius, 40 within the normal's).
+        let mut points: Vec<[f64; 3]> = (0..8000)
+            .map(|_| {
+                let (x, y): (f64, f64) = (rng.random_range(0.0..1.0), rng.random_range(0.0..1.0));
+                [x, y, 0.1 * (3.0 * x).sin()]
+            })
+            .collect();
+        points.extend((0..300).map(|_| std::array::from_fn(|_| rng.random_range(0.0..2.0))));
+        let config = FeatureConfig::for_spacing(0.02);
+        let tree = ImmutableKdTree::<f64, 3>::new_from_slice(&points).expect("a tree");
+        let near = neighbourhoods(&tree, &points, &config);
+        let (mut full, mut compared) = ([0, 0], 0);
+        for (p, hood) in points.iter().zip(&near).step_by(7) {
+            for (k, (radius, count)) in [
+                (config.normal_radius, config.normal_max_neighbours),
+                (config.feature_radius, config.feature_max_neighbours),
+            ]
+            .into_iter()
+            .enumerate()
+            {
+                let own: Vec<(u32, f64)> = tree
+                    .query(p)
+                    .nearest_n::<SquaredEuclidean<f64>>(NonZero::new(count).expect("count"))
+                    .within(radius * radius)
+                    .execute()
+                    .iter()
+                    .map(|r| (r.item, r.distance))
+                    .collect();
+                let prefix: Vec<(u32, f64)> = within(hood, radius, count).copied().collect();
+                assert_eq!(prefix, own, "{p:?} radius {radius} count {count}");
+                full[k] += usize::from(own.len() == count);
+                compared += 1;
+            }
+        }
+        // Both bounds were met: some neighbourhoods held more points than the count.
+        assert!(
+            compared > 1000 && full.iter().all(|&f| f > 10),
+            "{compared} {full:?}"
+        );
+    }
+}
