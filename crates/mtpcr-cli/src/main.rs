@@ -113,7 +113,9 @@ enum Command {
         /// Folder the scan paths are relative to [default: the parent of each problem's folder].
         #[arg(long, value_name = "DIR")]
         data_root: Option<PathBuf>,
-        /// Write every run's numbers to this JSON file.
+        /// Write every run's numbers to this JSON file (for four or more scans also each run's
+        /// poses: `poses` of the moved scans as registered, `poses_as_given` carried back to the
+        /// scans as given, in the first placed scan's frame, as scored against the truth).
         #[arg(long, value_name = "FILE")]
         json: Option<PathBuf>,
         /// Start every run from the scans placed by their ground-truth poses (relative
@@ -629,7 +631,12 @@ fn eval_views(
             runs
         ));
         let clouds = with_noise(clouds, noise, s)?;
-        let (result, scores, pairs) = mtpcr_core::eval::run_moved_views(
+        let mtpcr_core::eval::ViewsRun {
+            result,
+            poses_as_given,
+            scores,
+            pairs,
+        } = mtpcr_core::eval::run_moved_views(
             &clouds,
             &problem.poses,
             &problem.pair_sets,
@@ -678,6 +685,7 @@ fn eval_views(
             "unplaced_reasons": result.unplaced.iter().map(|u| u.reason.clone()).collect::<Vec<_>>(),
             "verdict": result.verdict,
             "poses": result.poses.iter().map(|p| p.as_ref().map(mtpcr_core::io::matrix_rows)).collect::<Vec<_>>(),
+            "poses_as_given": poses_as_given.iter().map(|p| p.as_ref().map(mtpcr_core::io::matrix_rows)).collect::<Vec<_>>(),
         }));
         all.push(run);
     }

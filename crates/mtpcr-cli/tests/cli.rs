@@ -1103,6 +1103,47 @@ fn eval_runs_a_problem_file_and_reports_each_run() {
         1,
         &["--ground-truth-frame applies to problems of two or three scans; synthetic has 4"],
     );
+    // Its JSON holds the poses it scored, carried back to the scans as given: each one's
+    // rotation error against the truth in the first placed scan's frame is the run's.
+    let four_report = dir.path().join("four-report.json");
+    mtpcr()
+        .arg("eval")
+        .arg(&four)
+        .arg("--data-root")
+        .arg(dir.path())
+        .args(["--runs", "1", "--seed", "2", "-q", "--json"])
+        .arg(&four_report)
+        .assert()
+        .success();
+    let run = read_json(&four_report)["problems"][0]["runs"][0].clone();
+    let matrix = |v: &serde_json::Value| -> Option<mtpcr_core::Transform> {
+        let rows: Vec<Vec<f64>> = serde_json::from_value(v.clone()).ok()?;
+        Some(mtpcr_core::Transform::from_fn(|r, c| rows[r][c]))
+    };
+    let given: Vec<Option<mtpcr_core::Transform>> = run["poses_as_given"]
+        .as_array()
+        .expect("poses_as_given")
+        .iter()
+        .map(matrix)
+        .collect();
+    let truth4 = [poses[0], poses[1], poses[2], poses[0]];
+    let first = given
+        .iter()
+        .position(Option::is_some)
+        .expect("a placed scan");
+    let mut scored = 0;
+    for (k, pose) in given.iter().enumerate() {
+        let Some(pose) = pose else { continue };
+        let truth_k = mtpcr_core::se3::invert_rigid(&truth4[first]) * truth4[k];
+        let error = mtpcr_core::se3::rotation_error_deg(pose, &truth_k);
+        let reported = run["rot_deg"][k].as_f64().expect("a placed scan's error");
+        assert!(
+            (error - reported).abs() < 1e-6,
+            "scan {k}: {error} {reported}"
+        );
+        scored += 1;
+    }
+    assert!(scored >= 2, "{run}");
     fails_with(
         mtpcr().arg("eval").arg(dir.path().join("none.json")),
         1,

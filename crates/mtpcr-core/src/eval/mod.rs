@@ -267,7 +267,7 @@ pub fn run_moved_views(
     success: problem::PairSuccess,
     config: &Config,
     seed: u64,
-) -> Result<(Registration, PoseScores, Vec<PairSetScore>)> {
+) -> Result<ViewsRun> {
     let extent = clouds
         .iter()
         .map(PointCloud::largest_side)
@@ -287,7 +287,26 @@ pub fn run_moved_views(
     let diagonal = object_diagonal(clouds, poses);
     let scores = score_poses(&as_given, poses, diagonal);
     let pairs = score_pair_sets(&as_given, poses, sets, success);
-    Ok((result, scores, pairs))
+    Ok(ViewsRun {
+        result,
+        poses_as_given: as_given,
+        scores,
+        pairs,
+    })
+}
+
+/// One run of [`run_moved_views`].
+pub struct ViewsRun {
+    /// The registration of the moved clouds.
+    pub result: Registration,
+    /// Its poses carried back to the clouds as given, in the first placed scan's frame
+    /// ([`poses_as_given`]): what `scores` and `pairs` score, comparable with the truth
+    /// (`inv(truth[a]) truth[k]` for the first placed scan `a`).
+    pub poses_as_given: Vec<Option<Transform>>,
+    /// Every scan's pose against the truth.
+    pub scores: PoseScores,
+    /// The pairs of each set recovered by the poses.
+    pub pairs: Vec<PairSetScore>,
 }
 
 /// Estimated poses of moved clouds (scan k moved into the first placed scan a moved) carried
