@@ -139,14 +139,14 @@ fn neighbourhoods(
         .normal_max_neighbours
         .max(config.feature_max_neighbours);
     let k = NonZero::new(most).expect("validated >= 3");
-    let r = config.normal_radius.max(config.feature_radius);
+    let radius = config.normal_radius.max(config.feature_radius);
     points
         .par_iter()
         .with_min_len(64)
         .map(|p| {
             tree.query(p)
                 .nearest_n::<SquaredEuclidean<f64>>(k)
-                .within(r * r)
+                .within(radius * radius)
                 .execute()
                 .iter()
                 .map(|r| (r.item, r.distance))
@@ -359,9 +359,8 @@ mod tests {
     #[test]
     fn a_neighbourhood_prefix_is_what_its_own_query_finds() {
         let mut rng = ChaCha8Rng::seed_from_u64(11);
-        // A wavy sheet (a surface, as scans are) and scattered points.
-        // Dense enough that both counts bind somewhere (about 250 points within the FPFH
-        // radius, 40 within the normal's).
+        // A wavy sheet (a surface, as scans are) and scattered points, dense enough that both
+        // counts bind somewhere (about 250 points within the FPFH radius, 40 within the normal's).
         let mut points: Vec<[f64; 3]> = (0..8000)
             .map(|_| {
                 let (x, y): (f64, f64) = (rng.random_range(0.0..1.0), rng.random_range(0.0..1.0));
