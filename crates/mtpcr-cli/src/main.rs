@@ -601,6 +601,8 @@ struct ViewRun {
     within_degrees: [usize; 3],
     within_translation: [usize; 3],
     pairs: Vec<mtpcr_core::eval::PairSetScore>,
+    /// Wrong and near scans from the best anchor (see `mtpcr_core::eval::best_anchor`).
+    best_anchor: Option<mtpcr_core::eval::AnchorScore>,
 }
 
 const WITHIN_DEGREES: [f64; 3] = [3.0, 5.0, 10.0];
@@ -636,6 +638,7 @@ fn eval_views(
             poses_as_given,
             scores,
             pairs,
+            best_anchor,
         } = mtpcr_core::eval::run_moved_views(
             &clouds,
             &problem.poses,
@@ -661,6 +664,7 @@ fn eval_views(
             within_degrees: WITHIN_DEGREES.map(|d| scores.within_degrees(d)),
             within_translation: WITHIN_TRANSLATION.map(|d| scores.within_translation(d)),
             pairs,
+            best_anchor,
         };
         if !quiet {
             bar.suspend(|| {
@@ -681,6 +685,7 @@ fn eval_views(
             "seed": s, "success": scores.success, "rot_deg": scores.rot_deg,
             "trans_rel": scores.trans, "translation": scores.translation,
             "wrong": run.wrong, "pair_sets": run.pairs, "seconds": result.seconds,
+            "best_anchor": run.best_anchor,
             "unplaced": result.unplaced.iter().map(|u| u.view).collect::<Vec<_>>(),
             "unplaced_reasons": result.unplaced.iter().map(|u| u.reason.clone()).collect::<Vec<_>>(),
             "verdict": result.verdict,
@@ -736,14 +741,15 @@ fn print_view_rows(rows: &[ViewRow]) {
         return;
     }
     outln!(
-        "\n{:<14} {:>5} {:>7} {:>6} {:>13} {:>17} {:>9}  pairs recovered",
+        "\n{:<14} {:>5} {:>7} {:>6} {:>13} {:>17} {:>9} {:>22}  pairs recovered",
         "problem",
         "seed",
         "placed",
         "wrong",
         "<3/5/10 deg",
         "<0.05/0.1/0.25",
-        "confident"
+        "confident",
+        "best anchor wrong/near"
     );
     for (name, scans, all) in rooms {
         for r in all {
@@ -754,8 +760,12 @@ fn print_view_rows(rows: &[ViewRow]) {
                 .collect();
             let [d3, d5, d10] = r.within_degrees;
             let [t5, t10, t25] = r.within_translation;
+            // From the best anchor (numbered from 1, as the fragments).
+            let anchored = r.best_anchor.map_or("-".to_string(), |a| {
+                format!("{}/{} (scan {})", a.wrong, a.near, a.scan + 1)
+            });
             outln!(
-                "{:<14} {:>5} {:>7} {:>6} {:>13} {:>17} {:>9}  {}",
+                "{:<14} {:>5} {:>7} {:>6} {:>13} {:>17} {:>9} {:>22}  {}",
                 name,
                 r.seed,
                 format!("{}/{scans}", r.placed),
@@ -763,6 +773,7 @@ fn print_view_rows(rows: &[ViewRow]) {
                 format!("{d3}/{d5}/{d10}"),
                 format!("{t5}/{t10}/{t25}"),
                 r.confident,
+                anchored,
                 pairs.join(", ")
             );
         }

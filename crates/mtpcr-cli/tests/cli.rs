@@ -1144,6 +1144,13 @@ fn eval_runs_a_problem_file_and_reports_each_run() {
         scored += 1;
     }
     assert!(scored >= 2, "{run}");
+    // The best anchor is a placed scan; it sees itself near the truth.
+    let anchor = &run["best_anchor"];
+    let scan = anchor["scan"].as_u64().expect("best_anchor.scan") as usize;
+    assert!(given[scan].is_some(), "{anchor}");
+    let near = anchor["near"].as_u64().expect("best_anchor.near") as usize;
+    assert!((1..=scored).contains(&near), "{anchor}");
+    assert!(anchor["wrong"].as_u64().expect("best_anchor.wrong") as usize <= scored - near);
     fails_with(
         mtpcr().arg("eval").arg(dir.path().join("none.json")),
         1,
