@@ -40,7 +40,10 @@ def main():
         gt = np.linalg.inv(truth[t]) @ truth[s]
         at_truth = reg.evaluate_registration(cloud(s), cloud(t), RADIUS, gt)
         icp = reg.registration_icp(
-            cloud(s), cloud(t), RADIUS, gt,
+            cloud(s),
+            cloud(t),
+            RADIUS,
+            gt,
             reg.TransformationEstimationPointToPlane(),
             reg.ICPConvergenceCriteria(max_iteration=60),
         )
