@@ -96,6 +96,17 @@ impl Pair {
 /// 2026-12-05).
 const PAIRS_PER_SCAN: usize = 4;
 
+/// A room's loop closures ([`closures`]): pairs of placed scans that no refined pair joins
+/// but of which at least this share of the source's points lies within eps of the target
+/// where the placement puts them (and still after their ICP), at most [`CLOSURES_PER_SCAN`]
+/// a scan, most overlap first. Over five rooms and three seeds they left no fragment wrong
+/// from the best anchor (4 before) and 270 within 5 degrees and 15 cm from it (262) over the
+/// four sun3d rooms; closures of at least 0.3 overlap only left a bridged home 12 wrong
+/// fragments where these left 2 (RESULTS.md, 2026-12-05, sixth session).
+const CLOSURE_OVERLAP: f64 = 0.1;
+/// See [`CLOSURE_OVERLAP`].
+const CLOSURES_PER_SCAN: usize = 4;
+
 /// Rounds of placement: a pair whose fit fails at the refined poses is rejected and the
 /// groups built again without it.
 const MAX_ROUNDS: usize = 4;
@@ -630,7 +641,15 @@ fn settle(
 /// A room's poses (centred, into the [`anchor`]'s frame) from the settled poses `start` (`None`:
 /// not placed): each [`confirming`] pair (at most [`PAIRS_PER_SCAN`] a scan) refined alone
 /// by ICP from the relative pose `start` gives it, then the poses fitted to those refined
-/// pairs ([`posegraph::fit`], weighted by matches). The start poses when refinement is off.
+/// pairs and to the room's loop closures found from the poses ([`closures`]), each refined
+/// alone the same way and kept when it stays clear of free space, overlapping and in
+/// agreement with the placement ([`posegraph::fit`], weighted by matches; a closure as the
+/// weakest chosen pair). The start poses when refinement is off.
+///
+/// Why closures: the chosen pairs are those whose features stood out; pairs that overlap
+/// less close the room's loops, and a chain that drifted or slid puts them slightly apart,
+/// where their ICP pulls it back (the home and hotel, three seeds each: no wrong fragment
+/// left, 4 before; RESULTS.md, 2026-12-05, sixth session).
 ///
 /// Why not the joint ICP of [`refine_placed`]: on rooms it turned the pose fit's poses
 /// several degrees away again (the study, 66 fragments, seed 0: 6 of 35 placed within 5
@@ -666,33 +685,110 @@ fn refine_room(
     });
     let full = prepared.refine_clouds();
     let interrupt = prepared.interrupt();
-    let refined: Vec<Relative> = strongest
+    // The pair's ICP from the relative pose `start` gives it, in the target's frame (the
+    // target, first, stays put).
+    let pair_icp = |r: &Relative| -> Option<Transform> {
+        let implied = invert_rigid(&start[r.target]?) * start[r.source]?;
+        let poses = refine_poses(
+            &[&full[r.target], &full[r.source]],
+            &[Edge {
+                source: 1,
+                target: 0,
+            }],
+            vec![
+                Rigid::from_matrix(&Transform::identity()),
+                Rigid::from_matrix(&implied),
+            ],
+            prepared.eps(),
+            config.refine_iterations,
+            pool,
+            &|| interrupt.is_set(),
+        );
+        Some(poses.get(1)?.to_matrix())
+    };
+    let closing = closures(prepared, pool, start, &strongest);
+    let mut refined: Vec<Relative> = strongest
         .into_iter()
         .filter_map(|r| {
-            let implied = invert_rigid(&start[r.target]?) * start[r.source]?;
-            // The pair's ICP in the target's frame: the target (first) stays put.
-            let poses = refine_poses(
-                &[&full[r.target], &full[r.source]],
-                &[Edge {
-                    source: 1,
-                    target: 0,
-                }],
-                vec![
-                    Rigid::from_matrix(&Transform::identity()),
-                    Rigid::from_matrix(&implied),
-                ],
-                prepared.eps(),
-                config.refine_iterations,
-                pool,
-                &|| interrupt.is_set(),
-            );
             Some(Relative {
-                t_target_source: poses.get(1)?.to_matrix(),
+                t_target_source: pair_icp(&r)?,
                 ..r
             })
         })
         .collect();
+    refined.extend(closing.into_iter().filter_map(|r| {
+        let own = pair_icp(&r)?;
+        let pose = Rigid::from_matrix(&own);
+        let overlap = 1.0 - prepared.inlier_loss(r.source, r.target).evaluate(&pose);
+        let clear = prepared
+            .free_space_share(r.source, r.target, &pose)
+            .is_none_or(|f| f <= HYPOTHESIS_FREE_SPACE);
+        let agrees = agree(&r.t_target_source, &own, CONSENSUS_DEGREES, 2.0 * tolerance);
+        (clear && overlap >= CLOSURE_OVERLAP && agrees).then_some(Relative {
+            t_target_source: own,
+            ..r
+        })
+    }));
     posegraph::fit(start, &refined, anchor(start))
+}
+
+/// A room's loop closures found from the placed poses `start` (`None`: not placed): the
+/// pairs of placed scans that no pair of `refining` joins and of which at least
+/// [`CLOSURE_OVERLAP`] of the source's points lie within eps of the target at the relative
+/// pose `start` gives them, most overlap first (ties in pair order), a pair kept while either
+/// scan has fewer than [`CLOSURES_PER_SCAN`]; each at that relative pose, weighted as the
+/// weakest chosen pair ([`MIN_SUPPORT`] matches).
+fn closures(
+    prepared: &PreparedProblem,
+    pool: &rayon::ThreadPool,
+    start: &[Option<Transform>],
+    refining: &[Relative],
+) -> Vec<Relative> {
+    let n = start.len();
+    let mut joined = vec![false; n * n];
+    for r in refining {
+        joined[r.source * n + r.target] = true;
+        joined[r.target * n + r.source] = true;
+    }
+    let candidates: Vec<(usize, usize)> = (0..n)
+        .flat_map(|s| (s + 1..n).map(move |t| (s, t)))
+        .filter(|&(s, t)| !joined[s * n + t])
+        .collect();
+    let mut found: Vec<(f64, Relative)> = pool.install(|| {
+        candidates
+            .par_iter()
+            .filter_map(|&(s, t)| {
+                let implied = invert_rigid(&start[t]?) * start[s]?;
+                let overlap = 1.0
+                    - prepared
+                        .inlier_loss(s, t)
+                        .evaluate(&Rigid::from_matrix(&implied));
+                (overlap >= CLOSURE_OVERLAP).then_some((
+                    overlap,
+                    Relative {
+                        source: s,
+                        target: t,
+                        t_target_source: implied,
+                        weight: MIN_SUPPORT as f64,
+                    },
+                ))
+            })
+            .collect()
+    });
+    // A stable sort: ties stay in pair order.
+    found.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let mut count = vec![0usize; n];
+    found
+        .into_iter()
+        .filter_map(|(_, r)| {
+            let keep = count[r.source] < CLOSURES_PER_SCAN || count[r.target] < CLOSURES_PER_SCAN;
+            if keep {
+                count[r.source] += 1;
+                count[r.target] += 1;
+            }
+            keep.then_some(r)
+        })
+        .collect()
 }
 
 /// The poses (centred, into the [`anchor`]'s frame) of the placed scans (`start`; `None`: not
@@ -1453,6 +1549,49 @@ mod tests {
     /// A room's placed scans are refined pair by pair and fitted to those pairs: from pair
     /// hypotheses each 2-3 degrees and a few centimetres off, the refined poses land on the
     /// truth (the room's three walls hold every pair against a slide).
+    /// A room's loop closures are the pairs of placed scans that overlap where the poses put
+    /// them and that no refined pair joins, each at the placement's relative pose; a scan
+    /// not placed, or placed where it overlaps nothing, closes none.
+    #[test]
+    fn loop_closures_are_the_overlapping_pairs_that_no_refined_pair_joins() {
+        use crate::freespace::tests::corner;
+        let (prepared, pairs) = room_of(corner());
+        let chosen = [Some(0); 4];
+        let rejected = [false; 4];
+        let tolerance = loop_tolerance(&prepared);
+        let (placed, _) = place(&pairs, &chosen, &rejected, 4, tolerance, &|_| true);
+        let start = settle(&pairs, &chosen, &rejected, &placed, tolerance);
+        assert!(start.iter().all(Option::is_some));
+        // The chain 0-1, 2-3, 1-2 is refined; 0-3 is not.
+        let chain: Vec<Relative> = confirming(&pairs, &chosen, &rejected, &start, tolerance)
+            .into_iter()
+            .filter(|r| (r.source, r.target) != (0, 3))
+            .collect();
+        assert_eq!(chain.len(), 3);
+        let pool = thread_pool(1).unwrap();
+        let found = |poses: &[Option<Transform>]| -> Vec<(usize, usize)> {
+            let mut found: Vec<(usize, usize)> = closures(&prepared, &pool, poses, &chain)
+                .iter()
+                .map(|r| {
+                    let implied =
+                        invert_rigid(&poses[r.target].unwrap()) * poses[r.source].unwrap();
+                    assert!((r.t_target_source - implied).norm() < 1e-12);
+                    assert_eq!(r.weight, MIN_SUPPORT as f64);
+                    (r.source, r.target)
+                })
+                .collect();
+            found.sort();
+            found
+        };
+        assert_eq!(found(&start), vec![(0, 2), (0, 3), (1, 3)]);
+        let mut without = start.clone();
+        without[3] = None;
+        assert_eq!(found(&without), vec![(0, 2)]);
+        let mut far = start.clone();
+        far[2] = Some(crate::se3::decode(&[0.0, 0.0, 0.0, 50.0, 0.0, 0.0]) * start[2].unwrap());
+        assert_eq!(found(&far), vec![(0, 3), (1, 3)]);
+    }
+
     #[test]
     fn a_room_is_refined_pair_by_pair_to_the_true_poses() {
         use crate::freespace::tests::{corner, pose};
