@@ -674,15 +674,7 @@ fn refine_room(
     let mut strongest = confirming(pairs, chosen, rejected, start, tolerance);
     // Most matches first (ties in pair order: `confirming` lists pairs in order).
     strongest.sort_by(|a, b| b.weight.total_cmp(&a.weight));
-    let mut count = vec![0usize; start.len()];
-    strongest.retain(|r| {
-        let keep = count[r.source] < PAIRS_PER_SCAN || count[r.target] < PAIRS_PER_SCAN;
-        if keep {
-            count[r.source] += 1;
-            count[r.target] += 1;
-        }
-        keep
-    });
+    let strongest = at_most_per_scan(strongest, start.len(), PAIRS_PER_SCAN);
     let full = prepared.refine_clouds();
     let interrupt = prepared.interrupt();
     // The pair's ICP from the relative pose `start` gives it, in the target's frame (the
@@ -777,16 +769,26 @@ fn closures(
     });
     // A stable sort: ties stay in pair order.
     found.sort_by(|a, b| b.0.total_cmp(&a.0));
+    at_most_per_scan(found.into_iter().map(|(_, r)| r), n, CLOSURES_PER_SCAN)
+}
+
+/// The pairs `ranked` (best first) of `n` scans, each kept while either of its scans has
+/// fewer than `limit` pairs kept before it.
+fn at_most_per_scan(
+    ranked: impl IntoIterator<Item = Relative>,
+    n: usize,
+    limit: usize,
+) -> Vec<Relative> {
     let mut count = vec![0usize; n];
-    found
+    ranked
         .into_iter()
-        .filter_map(|(_, r)| {
-            let keep = count[r.source] < CLOSURES_PER_SCAN || count[r.target] < CLOSURES_PER_SCAN;
+        .filter(|r| {
+            let keep = count[r.source] < limit || count[r.target] < limit;
             if keep {
                 count[r.source] += 1;
                 count[r.target] += 1;
             }
-            keep.then_some(r)
+            keep
         })
         .collect()
 }
