@@ -45,8 +45,8 @@ pub struct PreparedProblem {
     aiding_cap_ratio: f64,
     /// Keypoint features of each centred full-resolution cloud (only with hypotheses).
     features: Option<(FeatureConfig, Vec<Features>)>,
-    /// A pair's two centred full-resolution clouds (only for a pair with hypotheses and a
-    /// viewpoint): the second look of a doubted pair describes them again at finer keypoints
+    /// The centred full-resolution clouds (only with hypotheses and a viewpoint): the second
+    /// look of a doubted pair or of a room's bridge describes them again at finer keypoints
     /// ([`PreparedProblem::pair_hypotheses_finer`]).
     pair_points: Option<Vec<Vec<[f64; 3]>>>,
     /// What each scanner saw through (centred frames); empty when no scan has a viewpoint.
@@ -229,8 +229,9 @@ impl PreparedProblem {
                     .map(|c| describe(c, &feature_config))
                     .collect::<Result<_>>()
             })?;
-            // Only where a second look can happen (see `register`): not a large object pair.
-            let second_look = clouds.len() == 2 && clouds.iter().any(|c| c.viewpoint().is_some());
+            // Only where a second look can happen (a doubted pair, a room's bridges; see
+            // `register`): not for objects.
+            let second_look = clouds.iter().any(|c| c.viewpoint().is_some());
             let kept = second_look.then_some(full);
             (Some((feature_config, described)), kept)
         } else {
@@ -414,7 +415,7 @@ impl PreparedProblem {
 
     /// [`PreparedProblem::pair_hypotheses`] of a pair from keypoints [`FINER_KEYPOINTS`] times
     /// as far apart as the first ones, described anew: the second look of a pair the verdict
-    /// doubts. `None` without hypotheses, without a viewpoint or for more than two clouds.
+    /// doubts. `None` without hypotheses or without a viewpoint.
     pub(crate) fn pair_hypotheses_finer(
         &self,
         source: usize,

@@ -261,8 +261,8 @@ impl PreparedProblem {
     }
 
     /// The second look at a pair (`e`, the problem's only edge) that the verdict doubts: its
-    /// hypotheses from finer keypoints ([`PreparedProblem::pair_hypotheses_finer`]), the one
-    /// of most support chosen and refined as the first look's are; `None` without
+    /// hypotheses from finer keypoints ([`PreparedProblem::pair_hypotheses_finer`]), chosen,
+    /// refined and judged as the first look's are ([`PreparedProblem::look`]); `None` without
     /// hypotheses.
     fn second_look(
         &self,
@@ -270,14 +270,29 @@ impl PreparedProblem {
         config: &Config,
         pool: &rayon::ThreadPool,
     ) -> Result<Option<Look>> {
-        let (s, t) = (e.source, e.target);
-        let Some((matches, found)) = self.pair_hypotheses_finer(s, t, config.hypotheses, pool)?
+        let Some(found) =
+            self.pair_hypotheses_finer(e.source, e.target, config.hypotheses, pool)?
         else {
             return Ok(None);
         };
+        self.look(e, found, |start| {
+            let (pose, poses) = self.refined(vec![start], config, pool)?;
+            Ok((pose[0], poses))
+        })
+    }
+
+    /// A pair's answer from its descriptor `matches` and candidate poses (`found`, centred):
+    /// of those clear of free space, the one of largest overlap (as the search keeps without
+    /// generations), then the one of most support, refined by `refine` and judged as a pair
+    /// alone; `None` without a candidate.
+    fn look(
+        &self,
+        e: Edge,
+        (matches, found): (PairMatches, Vec<Rigid>),
+        refine: impl FnOnce(Rigid) -> Result<(Rigid, Option<Vec<Rigid>>)>,
+    ) -> Result<Option<Look>> {
+        let (s, t) = (e.source, e.target);
         let hypotheses = self.clear_of_free_space(s, t, found);
-        // As without generations in the first look: the hypothesis of largest overlap,
-        // then the one of most support.
         let loss = self.inlier_loss(s, t);
         let Some(largest_overlap) = hypotheses
             .iter()
@@ -289,14 +304,83 @@ impl PreparedProblem {
         };
         let clearance = |r: &Rigid| self.free_space_clearance(s, t, r);
         let start = best_supported(&matches, largest_overlap, &hypotheses, clearance);
-        let (pose, poses) = self.refined(vec![start], config, pool)?;
-        let measures = self.pair_check(e, &pose[0], &matches, &hypotheses);
+        let (pose, poses) = refine(start)?;
+        let measures = self.pair_check(e, &pose, &matches, &hypotheses);
         Ok(Some(Look {
             start,
-            pose: pose[0],
+            pose,
             poses,
+            support: matches.support(&pose.to_matrix()),
             measures,
         }))
+    }
+
+    /// A bridge for scans in no known order whose placement leaves them apart: the pair `e`
+    /// of this problem registered as a pair alone is, twice (the first look's keypoints and
+    /// the second look's finer ones, each answer refined by the pair's own ICP), its pose
+    /// (centred, source -> target) and the matches it explains when the verdict trusts both
+    /// answers and they agree ([`BRIDGE_DEGREES`], [`BRIDGE_SHIFT_FRACTION`]). One trusted
+    /// answer is not enough to join two groups that nothing else links: over every visible
+    /// 3DLoMatch pair the first look trusts 18 of the 616 it gets wrong, both looks
+    /// agreeing 4 (RESULTS.md, 2026-12-05, fifth session).
+    pub(crate) fn bridge(
+        &self,
+        e: Edge,
+        config: &Config,
+        pool: &rayon::ThreadPool,
+    ) -> Result<Option<(Rigid, usize)>> {
+        let (s, t) = (e.source, e.target);
+        let pair_icp = |start: Rigid| Ok((self.refine_pair(e, start, config, pool), None));
+        let trusted = |look: Option<Look>| {
+            look.filter(|l| doubts(std::slice::from_ref(&l.measures))[0].is_none())
+        };
+        let Some(found) = self.pair_hypotheses(s, t, config.hypotheses, HypothesisSearch::Pair)?
+        else {
+            return Ok(None);
+        };
+        let Some(first) = trusted(self.look(e, found, pair_icp)?) else {
+            return Ok(None);
+        };
+        let Some(found) = self.pair_hypotheses_finer(s, t, config.hypotheses, pool)? else {
+            return Ok(None);
+        };
+        let Some(second) = trusted(self.look(e, found, pair_icp)?) else {
+            return Ok(None);
+        };
+        let (a, b) = (first.pose.to_matrix(), second.pose.to_matrix());
+        let agree = rotation_error_deg(&a, &b) <= BRIDGE_DEGREES
+            && translation_error(&a, &b) <= BRIDGE_SHIFT_FRACTION * self.shift();
+        Ok(agree.then_some((first.pose, first.support)))
+    }
+
+    /// Pair `e`'s pose refined from `start` (centred, source -> target) by the ICP of its two
+    /// scans alone, in the target's frame; `start` when `config` does not refine.
+    fn refine_pair(
+        &self,
+        e: Edge,
+        start: Rigid,
+        config: &Config,
+        pool: &rayon::ThreadPool,
+    ) -> Rigid {
+        if config.refine_iterations == 0 {
+            return start;
+        }
+        let full = self.refine_clouds();
+        let interrupt = self.interrupt();
+        // The target (first) stays put.
+        let poses = refine_poses(
+            &[&full[e.target], &full[e.source]],
+            &[Edge {
+                source: 1,
+                target: 0,
+            }],
+            vec![Rigid::from_matrix(&Transform::identity()), start],
+            self.eps(),
+            config.refine_iterations,
+            pool,
+            &|| interrupt.is_set(),
+        );
+        poses.get(1).copied().unwrap_or(start)
     }
 
     /// Feature hypotheses of every edge (`hypotheses`, centred poses), for both of its
@@ -461,7 +545,12 @@ impl PreparedProblem {
     }
 }
 
-/// A pair's answer from [`PreparedProblem::second_look`].
+/// Two answers of a bridge agree within this many degrees...
+const BRIDGE_DEGREES: f64 = 3.0;
+/// ...and this fraction of the problem's shift (10 cm across a 4 m room).
+const BRIDGE_SHIFT_FRACTION: f64 = 0.025;
+
+/// A pair's answer from [`PreparedProblem::look`].
 struct Look {
     /// The pair's pose before refinement (centred frames, source -> target).
     start: Rigid,
@@ -469,6 +558,8 @@ struct Look {
     pose: Rigid,
     /// Every view's refined pose, as [`PreparedProblem::refined`] gives them.
     poses: Option<Vec<Rigid>>,
+    /// The descriptor matches `pose` explains.
+    support: usize,
     /// The verdict's measures of `pose`.
     measures: EdgeCheck,
 }
