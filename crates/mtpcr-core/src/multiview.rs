@@ -1702,6 +1702,19 @@ mod tests {
         assert!(r.poses.iter().all(Option::is_some), "{:?}", r.unplaced);
     }
 
+    /// The four scans of a room placed from all their pairs (no bridge, every join clear) and
+    /// settled on them.
+    fn every_pair_settled(prepared: &PreparedProblem, pairs: &[Pair]) -> Vec<Option<Transform>> {
+        let chosen = [Some(0); 4];
+        let rejected = [false; 4];
+        let tolerance = loop_tolerance(prepared);
+        let no_bridge = vec![false; pairs.len()];
+        let (placed, _, _) = place(pairs, &chosen, &rejected, &no_bridge, 4, tolerance, &|_| {
+            true
+        });
+        settle(pairs, &chosen, &rejected, &placed, tolerance)
+    }
+
     /// A room's loop closures are the pairs of placed scans that overlap where the poses put
     /// them and that no refined pair joins, each at the placement's relative pose; a scan
     /// not placed, or placed where it overlaps nothing, closes none.
@@ -1712,17 +1725,7 @@ mod tests {
         let chosen = [Some(0); 4];
         let rejected = [false; 4];
         let tolerance = loop_tolerance(&prepared);
-        let no_bridge = vec![false; pairs.len()];
-        let (placed, _, _) = place(
-            &pairs,
-            &chosen,
-            &rejected,
-            &no_bridge,
-            4,
-            tolerance,
-            &|_| true,
-        );
-        let start = settle(&pairs, &chosen, &rejected, &placed, tolerance);
+        let start = every_pair_settled(&prepared, &pairs);
         assert!(start.iter().all(Option::is_some));
         // The chain 0-1, 2-3, 1-2 is refined; 0-3 is not.
         let chain: Vec<Relative> = confirming(&pairs, &chosen, &rejected, &start, tolerance)
@@ -1869,17 +1872,7 @@ mod tests {
         let chosen = [Some(0); 4];
         let rejected = [false; 4];
         let tolerance = loop_tolerance(&prepared);
-        let no_bridge = vec![false; pairs.len()];
-        let (placed, _, _) = place(
-            &pairs,
-            &chosen,
-            &rejected,
-            &no_bridge,
-            4,
-            tolerance,
-            &|_| true,
-        );
-        let start = settle(&pairs, &chosen, &rejected, &placed, tolerance);
+        let start = every_pair_settled(&prepared, &pairs);
         let pool = thread_pool(1).unwrap();
         let config = Config {
             num_threads: 1,
