@@ -162,16 +162,17 @@ pub(crate) fn register_unordered(
 
 /// Scans are often given in the order they were captured, and neighbours in that order
 /// overlap. Where the placement leaves scans apart (rooms only: scans with viewpoints), each
-/// pair of neighbours in the given order whose scans lie in different groups is registered
-/// as a pair alone is, twice ([`PreparedProblem::bridge`]: the pair's full search at two
+/// pair of neighbours in the given order whose scans lie in different groups, and the
+/// strongest screened pair between each two groups of several scans ([`bridge_candidates`]),
+/// is registered as a pair alone is, twice ([`PreparedProblem::bridge`]: the pair's full search at two
 /// keypoint spacings, its ICP and the pair verdict, which the screening's quick hypotheses
 /// lack); a pair whose two answers the verdict trusts and which agree becomes a bridge
 /// (`true` at its index): its pose replaces the screened ones, and it may join two groups
 /// alone, still clear of free space ([`place`]), but stays only where a loop closes through
 /// it after the refinement ([`finish`]). With the loop closures, over the four sun3d rooms of
-/// 3DMatch and three seeds, 403 fragments placed instead of 293 and 2610 benchmark pairs
-/// recovered instead of 1953; the fragments they leave wrong are drift along chains
-/// (RESULTS.md, 2026-12-06).
+/// 3DMatch and three seeds, 463 fragments placed instead of 293 and 2961 benchmark pairs
+/// recovered instead of 1953, with 19 wrong in fragment 1's frame against 9, most of them
+/// drift along chains (RESULTS.md, 2026-12-06).
 fn bridge_groups(
     prepared: &PreparedProblem,
     config: &Config,
@@ -188,12 +189,7 @@ fn bridge_groups(
     let clear = join_clear(prepared, pool);
     let tolerance = loop_tolerance(prepared);
     let (_, _, group) = place(pairs, chosen, rejected, &bridge, n, tolerance, &clear);
-    let apart: Vec<usize> = (0..pairs.len())
-        .filter(|&p| {
-            let Edge { source, target } = pairs[p].edge;
-            source.abs_diff(target) == 1 && group[source] != group[target]
-        })
-        .collect();
+    let apart = bridge_candidates(pairs, &group);
     let found: Vec<Option<(Rigid, usize)>> = pool.install(|| {
         apart
             .par_iter()
@@ -213,6 +209,46 @@ fn bridge_groups(
         }
     }
     Ok(bridge)
+}
+
+/// The pairs [`bridge_groups`] registers alone, in pair order, given each scan's `group`:
+/// every pair of neighbours in the given order whose scans lie in different groups, and for
+/// every two groups of at least two scans, the pair between them whose screened hypotheses
+/// explain most matches (of equal ones, the first). The second kind finds links where the
+/// capture order does not: a room scanned twice over (the hotel's two halves, linked only by
+/// pairs such as 7-34 and 19-36) or groups whose neighbours do not overlap.
+fn bridge_candidates(pairs: &[Pair], group: &[usize]) -> Vec<usize> {
+    let mut size = vec![0usize; group.len()];
+    for &g in group {
+        size[g] += 1;
+    }
+    let mut candidates: Vec<usize> = Vec::new();
+    // The strongest pair between each two groups: (its matches, its index).
+    let mut strongest: std::collections::BTreeMap<(usize, usize), (usize, usize)> =
+        std::collections::BTreeMap::new();
+    for (p, pair) in pairs.iter().enumerate() {
+        let Edge { source, target } = pair.edge;
+        let (a, b) = (group[source], group[target]);
+        if a == b {
+            continue;
+        }
+        if source.abs_diff(target) == 1 {
+            candidates.push(p);
+        }
+        if size[a] >= 2 && size[b] >= 2 {
+            let matches = pair.supports.iter().copied().max().unwrap_or(0);
+            let best = strongest
+                .entry((a.min(b), a.max(b)))
+                .or_insert((matches, p));
+            if matches > best.0 {
+                *best = (matches, p);
+            }
+        }
+    }
+    candidates.extend(strongest.into_values().map(|(_, p)| p));
+    candidates.sort_unstable();
+    candidates.dedup();
+    candidates
 }
 
 /// Whether a join keeps every scan of each group out of the space every scanner of the other
@@ -1789,6 +1825,42 @@ mod tests {
             a.len() == 1
         });
         assert_eq!(refused.iter().filter(|p| p.is_some()).count(), 2);
+    }
+
+    /// Bridge candidates: the neighbours in the given order across groups, and the pair of
+    /// most matches between each two groups of several scans (none for a lone scan).
+    #[test]
+    fn bridges_are_tried_between_neighbours_and_between_groups_at_their_strongest_pair() {
+        let pair = |source: usize, target: usize, matches: usize| Pair {
+            edge: Edge { source, target },
+            poses: vec![(Transform::identity(), 0.5)],
+            supports: vec![matches, 3],
+        };
+        // Groups {0, 1}, {2, 3}, {4, 5}, {6}.
+        let group = [0, 0, 2, 2, 4, 4, 6];
+        let pairs = vec![
+            pair(0, 1, 90), // within a group
+            pair(0, 2, 30),
+            pair(0, 3, 40), // strongest between {0, 1} and {2, 3}
+            pair(1, 2, 10), // neighbours
+            pair(0, 4, 12),
+            pair(1, 5, 12), // tied with 0-4: the first is taken
+            pair(2, 5, 8),  // the only one between {2, 3} and {4, 5}
+            pair(3, 6, 50), // a lone scan: no strongest pair
+            pair(5, 6, 5),  // neighbours
+        ];
+        // Not 0-2 (neither neighbours nor the strongest between its groups), nor 1-5 (tied
+        // with 0-4), nor 3-6 (a lone scan).
+        let expected: Vec<usize> = [(0, 3), (1, 2), (0, 4), (2, 5), (5, 6)]
+            .iter()
+            .map(|&e| {
+                pairs
+                    .iter()
+                    .position(|p| (p.edge.source, p.edge.target) == e)
+                    .unwrap()
+            })
+            .collect();
+        assert_eq!(bridge_candidates(&pairs, &group), expected);
     }
 
     /// A bridge keeps the two groups it joins together only where, after the refinement, a
