@@ -368,9 +368,8 @@ fn finish(
         failing.extend(unclosed.into_iter().map(|p| {
             let Edge { source, target } = pairs[p].edge;
             let why = format!(
-                "the pair of scans {} and {}, neighbours in the given order, trusted twice \
-                 as a pair alone, joined two groups that no other pair links (no loop \
-                 closes through it)",
+                "the pair of scans {} and {}, trusted twice as a pair alone, bridged two \
+                 groups that no other pair links (no loop closes through it)",
                 source + 1,
                 target + 1
             );
