@@ -325,7 +325,8 @@ fn finish(
     // either of its scans.
     let mut failed: Vec<Option<String>> = vec![None; pairs.len()];
     let mut round = 0;
-    let (used, refined) = loop {
+    // The refined pairs, the poses, and the pairs' measures at them when already taken.
+    let (used, refined, checks) = loop {
         round += 1;
         let (placed, mut used, _) = place(pairs, chosen, &rejected, bridge, n, tolerance, &clear);
         let start_poses = settle(pairs, chosen, &rejected, &placed, tolerance);
@@ -376,7 +377,7 @@ fn finish(
             (p, why)
         }));
         if failing.is_empty() {
-            break (used, refined);
+            break (used, refined, Some(checks));
         }
         for (p, why) in failing {
             rejected[p] = true;
@@ -397,7 +398,7 @@ fn finish(
             .collect();
         let (refined, _) = refine(&used, &start_poses, &rejected);
         prepared.interrupt().check()?;
-        break (used, refined);
+        break (used, refined, None);
     };
 
     let edges: Vec<EdgeEstimate> = used
@@ -421,7 +422,10 @@ fn finish(
             })
         })
         .collect();
-    let (_, checks) = measure(prepared, pool, pairs, &used, &refined);
+    let checks = match checks {
+        Some(checks) => checks,
+        None => measure(prepared, pool, pairs, &used, &refined).1,
+    };
     let unplaced: Vec<Unplaced> = (0..n)
         .filter(|&v| refined[v].is_none())
         .map(|v| Unplaced {
@@ -839,52 +843,48 @@ fn refine_room(
     // Most matches first (ties in pair order: `confirming` lists pairs in order).
     strongest.sort_by(|a, b| b.weight.total_cmp(&a.weight));
     let strongest = at_most_per_scan(strongest, start.len(), PAIRS_PER_SCAN);
-    let full = prepared.refine_clouds();
-    let interrupt = prepared.interrupt();
-    // The pair's ICP from the relative pose `start` gives it, in the target's frame (the
-    // target, first, stays put).
+    // The pair's ICP from the relative pose `start` gives it, in the target's frame.
     let pair_icp = |r: &Relative| -> Option<Transform> {
         let implied = invert_rigid(&start[r.target]?) * start[r.source]?;
-        let poses = refine_poses(
-            &[&full[r.target], &full[r.source]],
-            &[Edge {
-                source: 1,
-                target: 0,
-            }],
-            vec![
-                Rigid::from_matrix(&Transform::identity()),
-                Rigid::from_matrix(&implied),
-            ],
-            prepared.eps(),
-            config.refine_iterations,
-            pool,
-            &|| interrupt.is_set(),
-        );
-        Some(poses.get(1)?.to_matrix())
+        let edge = Edge {
+            source: r.source,
+            target: r.target,
+        };
+        let own = prepared.refine_pair(edge, Rigid::from_matrix(&implied), config, pool);
+        Some(own.to_matrix())
     };
     let closing = closures(prepared, pool, start, &strongest);
-    let mut refined: Vec<Relative> = strongest
-        .into_iter()
-        .filter_map(|r| {
-            Some(Relative {
-                t_target_source: pair_icp(&r)?,
-                ..r
+    // The pairs in parallel (each ICP alone barely fills the threads); in pair order.
+    let mut refined: Vec<Relative> = pool.install(|| {
+        strongest
+            .par_iter()
+            .filter_map(|r| {
+                Some(Relative {
+                    t_target_source: pair_icp(r)?,
+                    ..r.clone()
+                })
             })
-        })
-        .collect();
-    refined.extend(closing.into_iter().filter_map(|r| {
-        let own = pair_icp(&r)?;
-        let pose = Rigid::from_matrix(&own);
-        let overlap = 1.0 - prepared.inlier_loss(r.source, r.target).evaluate(&pose);
-        let clear = prepared
-            .free_space_share(r.source, r.target, &pose)
-            .is_none_or(|f| f <= HYPOTHESIS_FREE_SPACE);
-        let agrees = agree(&r.t_target_source, &own, CONSENSUS_DEGREES, 2.0 * tolerance);
-        (clear && overlap >= CLOSURE_OVERLAP && agrees).then_some(Relative {
-            t_target_source: own,
-            ..r
-        })
-    }));
+            .collect()
+    });
+    let kept: Vec<Relative> = pool.install(|| {
+        closing
+            .par_iter()
+            .filter_map(|r| {
+                let own = pair_icp(r)?;
+                let pose = Rigid::from_matrix(&own);
+                let overlap = 1.0 - prepared.inlier_loss(r.source, r.target).evaluate(&pose);
+                let clear = prepared
+                    .free_space_share(r.source, r.target, &pose)
+                    .is_none_or(|f| f <= HYPOTHESIS_FREE_SPACE);
+                let agrees = agree(&r.t_target_source, &own, CONSENSUS_DEGREES, 2.0 * tolerance);
+                (clear && overlap >= CLOSURE_OVERLAP && agrees).then_some(Relative {
+                    t_target_source: own,
+                    ..r.clone()
+                })
+            })
+            .collect()
+    });
+    refined.extend(kept);
     (
         posegraph::fit(start, &refined, anchor(start)),
         links(&refined),

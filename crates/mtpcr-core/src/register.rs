@@ -355,7 +355,7 @@ impl PreparedProblem {
 
     /// Pair `e`'s pose refined from `start` (centred, source -> target) by the ICP of its two
     /// scans alone, in the target's frame; `start` when `config` does not refine.
-    fn refine_pair(
+    pub(crate) fn refine_pair(
         &self,
         e: Edge,
         start: Rigid,
