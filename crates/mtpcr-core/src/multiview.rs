@@ -1356,7 +1356,7 @@ fn unplaced_reason(
         format!("scan {} lost its place: {why}", v + 1)
     } else if mine.iter().any(|&p| chosen[p].is_some() && !rejected[p]) {
         format!(
-            "scan {} overlaps others only in a group not connected to the placed scans, a larger group (no link confirmed by a second pair and clear of the other scanners' free space)",
+            "scan {} overlaps others only in a group not connected to the placed scans (the largest group): no pair between the two groups was confirmed by a second one, or bridged them alone, clear of the other scanners' free space",
             v + 1
         )
     } else if mine.iter().any(|&p| chosen[p].is_some()) {
