@@ -4,7 +4,7 @@
 use super::{Candidate, Descriptor, FeatureConfig, Features, Matching};
 use super::{DESCRIPTOR_LEN, MIN_MUTUAL_MATCHES};
 use crate::se3::Rigid;
-use crate::search::{NearestGrid, QueryAnchor};
+use crate::search::{dispatch_by_lanes, Lanes, LastQuery, NearestGrid};
 use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -221,39 +221,18 @@ fn nearest_both_ways(source: &[Descriptor], target: &[Descriptor]) -> (Vec<u32>,
             columns[k * nt + j] = *v;
         }
     }
+    let columns = DescriptorColumns {
+        columns,
+        nt,
+        lanes: Lanes::widest(),
+    };
     // Per block of source rows: each row's nearest target, and each target's nearest row in
     // the block as (distance, row). Merging blocks by the smaller (distance, row) gives the
     // same answer in any order.
     let blocks: Vec<BlockNearest> = source
         .par_chunks(MATCH_ROWS)
         .enumerate()
-        .map(|(b, rows)| {
-            let mut best_row = vec![(f32::INFINITY, u32::MAX); nt];
-            let mut nearest = Vec::with_capacity(rows.len());
-            let mut dist = vec![0.0f32; nt];
-            for (r, q) in rows.iter().enumerate() {
-                dist.iter_mut().for_each(|d| *d = 0.0);
-                for (k, &a) in q.iter().enumerate() {
-                    let col = &columns[k * nt..(k + 1) * nt];
-                    for (d, &c) in dist.iter_mut().zip(col) {
-                        let x = a - c;
-                        *d += x * x;
-                    }
-                }
-                let i = (b * MATCH_ROWS + r) as u32;
-                let (mut arg, mut min) = (0u32, f32::INFINITY);
-                for (j, (&d, best)) in dist.iter().zip(best_row.iter_mut()).enumerate() {
-                    if d < min {
-                        (arg, min) = (j as u32, d);
-                    }
-                    if d < best.0 {
-                        *best = (d, i);
-                    }
-                }
-                nearest.push(arg);
-            }
-            (nearest, best_row)
-        })
+        .map(|(b, rows)| columns.block_nearest(b * MATCH_ROWS, rows))
         .collect();
     let mut forward = Vec::with_capacity(source.len());
     let mut best_row = vec![(f32::INFINITY, 0u32); nt];
@@ -267,6 +246,56 @@ fn nearest_both_ways(source: &[Descriptor], target: &[Descriptor]) -> (Vec<u32>,
     }
     (forward, best_row.into_iter().map(|(_, i)| i).collect())
 }
+
+/// Target descriptors one dimension at a time (`columns[k * nt + j]`: dimension `k` of
+/// target `j`), and the widest vectors this CPU runs.
+struct DescriptorColumns {
+    columns: Vec<f32>,
+    nt: usize,
+    lanes: Lanes,
+}
+
+impl DescriptorColumns {
+    /// For source rows `first..first + rows.len()`: each row's nearest target, and each
+    /// target's nearest row among them as (distance, row).
+    #[inline(always)]
+    fn block_nearest_portable(&self, first: usize, rows: &[Descriptor]) -> BlockNearest {
+        let nt = self.nt;
+        let mut best_row = vec![(f32::INFINITY, u32::MAX); nt];
+        let mut nearest = Vec::with_capacity(rows.len());
+        let mut dist = vec![0.0f32; nt];
+        for (r, q) in rows.iter().enumerate() {
+            dist.iter_mut().for_each(|d| *d = 0.0);
+            for (k, &a) in q.iter().enumerate() {
+                let col = &self.columns[k * nt..(k + 1) * nt];
+                for (d, &c) in dist.iter_mut().zip(col) {
+                    let x = a - c;
+                    *d += x * x;
+                }
+            }
+            let i = (first + r) as u32;
+            let (mut arg, mut min) = (0u32, f32::INFINITY);
+            for (j, (&d, best)) in dist.iter().zip(best_row.iter_mut()).enumerate() {
+                if d < min {
+                    (arg, min) = (j as u32, d);
+                }
+                if d < best.0 {
+                    *best = (d, i);
+                }
+            }
+            nearest.push(arg);
+        }
+        (nearest, best_row)
+    }
+}
+
+// `block_nearest`: `block_nearest_portable` as compiled for the widest vectors (the same sums
+// in the same order, so the same matches bit for bit).
+dispatch_by_lanes!(
+    DescriptorColumns,
+    fn block_nearest(&self, first: usize, rows: &[Descriptor]) -> BlockNearest
+        => block_nearest_portable
+);
 
 /// RANSAC over triples of matches: the best `capacity` distinct hypotheses by score, best
 /// first.
@@ -595,28 +624,21 @@ fn refine(
     }
     // (source keypoint, nearest target keypoint, squared distance) within sqrt(d2), normals
     // agreeing. A keypoint certainly still beyond sqrt(d2) since its last query needs none.
-    let mut anchors = vec![QueryAnchor::NONE; source.points.len()];
+    let mut last = vec![LastQuery::NONE; source.points.len()];
     let mut pairs_within = |pose: &Rigid, d2: f64| -> Vec<(usize, usize, f64)> {
         source
             .points
             .iter()
-            .zip(&mut anchors)
+            .zip(&mut last)
             .enumerate()
-            .filter_map(|(i, (p, anchor))| {
-                let q = pose.apply(p);
-                if anchor.still_beyond(&q, d2.sqrt()) {
-                    return None;
-                }
-                let nn = grid.nearest(&q);
-                anchor.set(q, nn.distance);
-                let (j, distance) = nn.hit?;
-                let ok = distance <= d2
-                    && normals_agree(
-                        pose,
-                        &source.normals[i],
-                        &target.normals[j],
-                        matched.cos_min,
-                    );
+            .filter_map(|(i, (p, last))| {
+                let (j, distance) = grid.nearest_from(&pose.apply(p), d2, last)?;
+                let ok = normals_agree(
+                    pose,
+                    &source.normals[i],
+                    &target.normals[j],
+                    matched.cos_min,
+                );
                 ok.then_some((i, j, distance))
             })
             .collect()
@@ -821,6 +843,42 @@ fn dist2(a: &[f64; 3], b: &[f64; 3]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn descriptors_match_alike_on_every_vector_width_and_as_brute_force_says() {
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let mut descriptor =
+            || -> Descriptor { std::array::from_fn(|_| rng.random_range(0.0f32..1.0)) };
+        let source: Vec<Descriptor> = (0..150).map(|_| descriptor()).collect();
+        let target: Vec<Descriptor> = (0..77).map(|_| descriptor()).collect();
+        let d2 = |a: &Descriptor, b: &Descriptor| -> f32 {
+            a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum()
+        };
+        let nearest_in = |q: &Descriptor, set: &[Descriptor]| -> u32 {
+            (0..set.len())
+                .min_by(|&i, &j| d2(q, &set[i]).total_cmp(&d2(q, &set[j])))
+                .map(|i| i as u32)
+                .expect("a non-empty set")
+        };
+        let (forward, backward) = nearest_both_ways(&source, &target);
+        let forward_brute: Vec<u32> = source.iter().map(|q| nearest_in(q, &target)).collect();
+        let backward_brute: Vec<u32> = target.iter().map(|q| nearest_in(q, &source)).collect();
+        assert_eq!(forward, forward_brute);
+        assert_eq!(backward, backward_brute);
+        // Each vector width this CPU runs gives the portable copy's answer bit for bit.
+        let mut columns = DescriptorColumns {
+            columns: (0..DESCRIPTOR_LEN)
+                .flat_map(|k| target.iter().map(move |t| t[k]))
+                .collect(),
+            nt: target.len(),
+            lanes: Lanes::Portable,
+        };
+        let portable = columns.block_nearest(64, &source[64..128]);
+        for lanes in [Lanes::Avx2, Lanes::Avx512] {
+            columns.lanes = lanes.on_this_cpu();
+            assert_eq!(columns.block_nearest(64, &source[64..128]), portable);
+        }
+    }
 
     #[test]
     fn a_bit_matrix_transposes() {

@@ -26,7 +26,7 @@ pub(super) fn floor_in_range(v: f64) -> u32 {
 
 /// The vector width a batched lookup runs in. Ordered from narrowest to widest.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
-pub(super) enum Lanes {
+pub(crate) enum Lanes {
     /// The code as compiled for the target (SSE2 on x86-64).
     Portable,
     /// Compiled for AVX2 (`has_avx2`).
@@ -58,7 +58,7 @@ fn has_avx512() -> bool {
 
 impl Lanes {
     /// The widest copy this CPU can run (the features are checked by std, once).
-    pub(super) fn widest() -> Lanes {
+    pub(crate) fn widest() -> Lanes {
         #[cfg(target_arch = "x86_64")]
         {
             if has_avx512() {
@@ -74,7 +74,7 @@ impl Lanes {
     /// `self`, or the widest this CPU runs where that is narrower: what an index may hold
     /// (tests narrow an index's copy with it).
     #[cfg(test)]
-    pub(super) fn on_this_cpu(self) -> Lanes {
+    pub(crate) fn on_this_cpu(self) -> Lanes {
         self.min(Lanes::widest())
     }
 }
@@ -115,7 +115,7 @@ macro_rules! dispatch_by_lanes {
         }
     };
 }
-pub(super) use dispatch_by_lanes;
+pub(crate) use dispatch_by_lanes;
 
 #[cfg(test)]
 mod tests {

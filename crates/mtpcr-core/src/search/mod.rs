@@ -27,7 +27,8 @@ mod nearest;
 pub use field::DistanceField;
 pub use grid::InlierGrid;
 pub use kdtree::KdTreeIndex;
-pub(crate) use nearest::NearestGrid;
+pub(crate) use lanes::{dispatch_by_lanes, Lanes};
+pub(crate) use nearest::{LastQuery, NearestGrid};
 
 use crate::se3::Rigid;
 use std::sync::Arc;
