@@ -34,6 +34,9 @@ const MIN_TRIANGLE_HEIGHT: f64 = 1.0;
 /// Source descriptors handled together by [`nearest_both_ways`].
 const MATCH_ROWS: usize = 64;
 
+/// Source descriptors whose distances the matching sums together (`MATCH_ROWS` a multiple).
+const ROWS_AT_ONCE: usize = 4;
+
 /// A pose and its score: the number of matches it maps within the inlier distance.
 #[derive(Clone, Copy, Debug)]
 struct Hypothesis {
@@ -263,27 +266,55 @@ impl DescriptorColumns {
         let nt = self.nt;
         let mut best_row = vec![(f32::INFINITY, u32::MAX); nt];
         let mut nearest = Vec::with_capacity(rows.len());
-        let mut dist = vec![0.0f32; nt];
-        for (r, q) in rows.iter().enumerate() {
+        // Four rows' distances at once: each column value loaded once serves four rows (the
+        // loop is bound by loading the columns); every sum still runs over the dimensions in
+        // order.
+        let mut dist = vec![0.0f32; ROWS_AT_ONCE * nt];
+        for (g, group) in rows.chunks(ROWS_AT_ONCE).enumerate() {
             dist.iter_mut().for_each(|d| *d = 0.0);
-            for (k, &a) in q.iter().enumerate() {
-                let col = &self.columns[k * nt..(k + 1) * nt];
-                for (d, &c) in dist.iter_mut().zip(col) {
-                    let x = a - c;
-                    *d += x * x;
+            if let [q0, q1, q2, q3] = group {
+                let (d0, rest) = dist.split_at_mut(nt);
+                let (d1, rest) = rest.split_at_mut(nt);
+                let (d2, d3) = rest.split_at_mut(nt);
+                for k in 0..DESCRIPTOR_LEN {
+                    let col = &self.columns[k * nt..(k + 1) * nt];
+                    let (a0, a1, a2, a3) = (q0[k], q1[k], q2[k], q3[k]);
+                    for ((((&c, e0), e1), e2), e3) in col
+                        .iter()
+                        .zip(d0.iter_mut())
+                        .zip(d1.iter_mut())
+                        .zip(d2.iter_mut())
+                        .zip(d3.iter_mut())
+                    {
+                        *e0 += (a0 - c) * (a0 - c);
+                        *e1 += (a1 - c) * (a1 - c);
+                        *e2 += (a2 - c) * (a2 - c);
+                        *e3 += (a3 - c) * (a3 - c);
+                    }
+                }
+            } else {
+                for (q, d) in group.iter().zip(dist.chunks_mut(nt)) {
+                    for (k, &a) in q.iter().enumerate() {
+                        let col = &self.columns[k * nt..(k + 1) * nt];
+                        for (d, &c) in d.iter_mut().zip(col) {
+                            *d += (a - c) * (a - c);
+                        }
+                    }
                 }
             }
-            let i = (first + r) as u32;
-            let (mut arg, mut min) = (0u32, f32::INFINITY);
-            for (j, (&d, best)) in dist.iter().zip(best_row.iter_mut()).enumerate() {
-                if d < min {
-                    (arg, min) = (j as u32, d);
+            for (r, d) in dist.chunks(nt).take(group.len()).enumerate() {
+                let i = (first + g * ROWS_AT_ONCE + r) as u32;
+                let (mut arg, mut min) = (0u32, f32::INFINITY);
+                for (j, (&d, best)) in d.iter().zip(best_row.iter_mut()).enumerate() {
+                    if d < min {
+                        (arg, min) = (j as u32, d);
+                    }
+                    if d < best.0 {
+                        *best = (d, i);
+                    }
                 }
-                if d < best.0 {
-                    *best = (d, i);
-                }
+                nearest.push(arg);
             }
-            nearest.push(arg);
         }
         (nearest, best_row)
     }
