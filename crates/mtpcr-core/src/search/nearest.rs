@@ -4,6 +4,9 @@
 //! those queries were most of the time of screening a room's pairs (kiddo's `nearest_one`,
 //! 57 % of a 38-fragment room). With this grid the same answers came in 0.84x the time of
 //! 600 3DMatch / 3DLoMatch pairs and 0.85x that of the 38-fragment room (RESULTS.md, 2026-12-04).
+//! A query that remembers its last answer ([`NearestGrid::nearest_from`]) searches only as far
+//! as the point found last time can now be, and one outside the cloud's box none (RESULTS.md,
+//! 2026-12-06, third session).
 
 use super::dist2;
 use crate::cloud::bounds;
