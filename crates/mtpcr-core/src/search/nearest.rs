@@ -8,7 +8,7 @@
 //! as the point found last time can now be, and one outside the cloud's box none (RESULTS.md,
 //! 2026-12-06, third session).
 
-use super::dist2;
+use super::{dist2, QueryAnchor};
 use crate::cloud::bounds;
 
 /// Cells a grid holds at most (4 bytes each); a cloud spread wider gets wider cells.
@@ -40,17 +40,16 @@ pub(crate) struct Nearest {
 /// about every keypoint in every round while the pose moves a little).
 #[derive(Clone, Copy)]
 pub(crate) struct LastQuery {
-    at: [f64; 3],
-    /// The nearest point's exact distance when `exact`, else a lower bound of it.
-    distance: f64,
+    /// Where it was asked, and the nearest point's distance: exact when `exact`, else a
+    /// lower bound.
+    anchor: QueryAnchor,
     exact: bool,
 }
 
 impl LastQuery {
     /// Not queried yet.
     pub(crate) const NONE: LastQuery = LastQuery {
-        at: [0.0; 3],
-        distance: f64::NEG_INFINITY,
+        anchor: QueryAnchor::NONE,
         exact: false,
     };
 }
@@ -116,9 +115,8 @@ impl NearestGrid {
 
     /// The nearest point to `q` when its squared distance is at most `radius2` (at most the
     /// cell size squared; of equally near points, the one met first), else a lower bound of
-    /// its distance. Only the cells the sphere of that radius touches are searched: the
-    /// keypoint ICP shrinks its pairing distance to half the cell size, where that is 2 x 2 x 2
-    /// cells or fewer instead of 3 x 3 x 3.
+    /// its distance. Only the cells the sphere of that radius touches are searched (a few for the
+    /// small radii [`NearestGrid::nearest_from`] asks with, instead of 3 x 3 x 3).
     #[inline]
     pub(crate) fn nearest_within(&self, q: &[f64; 3], radius2: f64) -> Nearest {
         if !q.iter().all(|v| v.is_finite()) {
@@ -221,22 +219,18 @@ impl NearestGrid {
         radius2: f64,
         last: &mut LastQuery,
     ) -> Option<(usize, f64)> {
-        let moved = dist2(q, &last.at).sqrt();
-        let radius = radius2.sqrt();
         // (Margins far above rounding keep "certainly" true.)
         let found = if last.exact {
-            let reach = (last.distance + moved) * (1.0 + 1e-9) + 1e-9 * self.cell;
+            let moved = dist2(q, &last.anchor.at).sqrt();
+            let reach = (last.anchor.distance + moved) * (1.0 + 1e-9) + 1e-9 * self.cell;
             self.nearest_within(q, radius2.min(reach * reach))
-        } else if last.distance - moved > radius * (1.0 + 1e-9) {
+        } else if last.anchor.still_beyond(q, radius2.sqrt()) {
             return None;
         } else {
             self.nearest(q)
         };
-        *last = LastQuery {
-            at: *q,
-            distance: found.distance,
-            exact: found.hit.is_some(),
-        };
+        last.anchor.set(*q, found.distance);
+        last.exact = found.hit.is_some();
         found.hit.filter(|&(_, d)| d <= radius2)
     }
 }
