@@ -30,7 +30,7 @@ use crate::problem::{HypothesisSearch, PreparedProblem};
 use crate::refine::refine_poses;
 use crate::result::{EdgeEstimate, Registration, Unplaced};
 use crate::screening::{fingerprint, ScreenedPair, Screening};
-use crate::se3::{invert_rigid, rotation_error_deg, translation_error, Rigid, Transform};
+use crate::se3::{invert_rigid, poses_agree, Rigid, Transform};
 use crate::verdict::{
     doubts, judge, EdgeCheck, HYPOTHESIS_FREE_SPACE, MAX_RESIDUAL, MIN_OVERLAP, MIN_SCENE_LOG_ODDS,
     MIN_SUPPORT, RIVAL_RATIO,
@@ -545,7 +545,7 @@ fn loop_closes(
             continue;
         }
         let x = group_pose(pairs, group, frame, q, &t_q, a);
-        if agree(&x, t_ab, CONSENSUS_DEGREES, 2.0 * tolerance) {
+        if poses_agree(&x, t_ab, CONSENSUS_DEGREES, 2.0 * tolerance) {
             for_it += support;
             agreeing += 1;
             let (in_a, in_b) = if gu == a { (u, v) } else { (v, u) };
@@ -579,7 +579,7 @@ fn confirming(
             let Edge { source, target } = pairs[p].edge;
             let (own, support) = (pairs[p].poses.get(h)?.0, *pairs[p].supports.get(h)?);
             let implied = invert_rigid(&placed[target]?) * placed[source]?;
-            agree(&implied, &own, CONSENSUS_DEGREES, 2.0 * tolerance).then_some(Relative {
+            poses_agree(&implied, &own, CONSENSUS_DEGREES, 2.0 * tolerance).then_some(Relative {
                 source,
                 target,
                 t_target_source: own,
@@ -767,7 +767,7 @@ fn place(
         } = pairs[p].edge;
         if let (Some(ws), Some(wt)) = (poses[s], poses[t]) {
             let implied = invert_rigid(&wt) * ws;
-            if agree(&implied, &own, CLOSURE_DEGREES, tolerance) {
+            if poses_agree(&implied, &own, CLOSURE_DEGREES, tolerance) {
                 used.push(p);
             }
         }
@@ -876,7 +876,8 @@ fn refine_room(
                 let clear = prepared
                     .free_space_share(r.source, r.target, &pose)
                     .is_none_or(|f| f <= HYPOTHESIS_FREE_SPACE);
-                let agrees = agree(&r.t_target_source, &own, CONSENSUS_DEGREES, 2.0 * tolerance);
+                let agrees =
+                    poses_agree(&r.t_target_source, &own, CONSENSUS_DEGREES, 2.0 * tolerance);
                 (clear && overlap >= CLOSURE_OVERLAP && agrees).then_some(Relative {
                     t_target_source: own,
                     ..r.clone()
@@ -1305,7 +1306,7 @@ pub(crate) fn best_closing_triple(
         for (b, (t_kj, ob)) in jk.iter().take(PER_SIDE).enumerate() {
             let via_j = t_kj * t_ji;
             for (c, (t_ki, oc)) in ik.iter().take(PER_SIDE).enumerate() {
-                if agree(&via_j, t_ki, LOOP_DEGREES, tolerance) {
+                if poses_agree(&via_j, t_ki, LOOP_DEGREES, tolerance) {
                     let score = oa + ob + oc;
                     if best.is_none_or(|(s, _)| score > s) {
                         best = Some((score, [a, b, c]));
@@ -1315,11 +1316,6 @@ pub(crate) fn best_closing_triple(
         }
     }
     best
-}
-
-/// Whether two poses agree: rotations within `degrees`, translations within `shift`.
-fn agree(a: &Transform, b: &Transform, degrees: f64, shift: f64) -> bool {
-    rotation_error_deg(a, b) < degrees && translation_error(a, b) < shift
 }
 
 /// The loop-closing tolerance on translations for a problem (a fraction of its shift).
@@ -1382,6 +1378,7 @@ mod tests {
     use super::*;
     use crate::cloud::PointCloud;
     use crate::problem::thread_pool;
+    use crate::se3::{rotation_error_deg, translation_error};
     use crate::synthetic::views_around;
 
     /// A prepared problem of `count` synthetic views (no feature hypotheses: the tests craft

@@ -15,10 +15,7 @@ use crate::problem::{thread_pool, HypothesisSearch, PreparedProblem};
 use crate::refine::refine_poses;
 use crate::result::{EdgeEstimate, Registration};
 use crate::screening::Screening;
-use crate::se3::{
-    decode, encode, invert_rigid, rotation_error_deg, translation_error, Individual, Rigid,
-    Transform,
-};
+use crate::se3::{decode, encode, invert_rigid, poses_agree, Individual, Rigid, Transform};
 use crate::verdict::{doubts, judge, EdgeCheck, SCENE_ODDS};
 use rayon::prelude::*;
 use std::ops::ControlFlow;
@@ -348,8 +345,7 @@ impl PreparedProblem {
             return Ok(None);
         };
         let (a, b) = (first.pose.to_matrix(), second.pose.to_matrix());
-        let agree = rotation_error_deg(&a, &b) <= BRIDGE_DEGREES
-            && translation_error(&a, &b) <= BRIDGE_SHIFT_FRACTION * self.shift();
+        let agree = poses_agree(&a, &b, BRIDGE_DEGREES, BRIDGE_SHIFT_FRACTION * self.shift());
         Ok(agree.then_some((first.pose, first.support)))
     }
 
@@ -690,10 +686,10 @@ fn search(
         let stopped = !out.completed;
         let transforms: Vec<Transform> = (0..edges).map(|e| decode(&out.best[edges + e])).collect();
         let agrees = |other: &Vec<Transform>| {
-            other.iter().zip(&transforms).all(|(a, b)| {
-                rotation_error_deg(a, b) < AGREE_DEGREES
-                    && translation_error(a, b) < AGREE_SHIFT_FRACTION * shift
-            })
+            other
+                .iter()
+                .zip(&transforms)
+                .all(|(a, b)| poses_agree(a, b, AGREE_DEGREES, AGREE_SHIFT_FRACTION * shift))
         };
         agreed |= finals.iter().any(agrees);
         finals.push(transforms);

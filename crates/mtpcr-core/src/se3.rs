@@ -195,6 +195,12 @@ pub fn translation_error(a: &Transform, b: &Transform) -> f64 {
     (ta - tb).norm()
 }
 
+/// Whether two poses agree: rotations closer than `degrees`, translations closer than
+/// `shift` (the test of loops, joins, bridges and restarts).
+pub(crate) fn poses_agree(a: &Transform, b: &Transform, degrees: f64, shift: f64) -> bool {
+    rotation_error_deg(a, b) < degrees && translation_error(a, b) < shift
+}
+
 /// A rigid motion with a rotation uniform over SO(3) and a translation uniform in
 /// `[-max_translation, max_translation]^3`.
 pub fn random_rigid<R: Rng + ?Sized>(rng: &mut R, max_translation: f64) -> Transform {
@@ -298,5 +304,26 @@ mod tests {
         let fro = 2.0 * 2f64.sqrt() * (theta / 2.0).sin();
         assert!((rotation_error_fro(&a, &b) - fro).abs() < 1e-12);
         assert!((translation_error(&a, &b) - 5.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn poses_agree_only_when_both_rotation_and_translation_are_within_bounds() {
+        let turned = |deg: f64, shift: f64| {
+            let mut t = Transform::identity();
+            let r = nalgebra::Rotation3::from_axis_angle(&Vector3::z_axis(), deg.to_radians());
+            t.fixed_view_mut::<3, 3>(0, 0).copy_from(r.matrix());
+            t[(0, 3)] = shift;
+            t
+        };
+        let a = Transform::identity();
+        assert!(poses_agree(&a, &turned(4.0, 0.9), 5.0, 1.0));
+        assert!(!poses_agree(&a, &turned(6.0, 0.9), 5.0, 1.0));
+        assert!(!poses_agree(&a, &turned(4.0, 1.1), 5.0, 1.0));
+        assert!(poses_agree(
+            &turned(30.0, 2.0),
+            &turned(33.0, 2.5),
+            5.0,
+            1.0
+        ));
     }
 }
