@@ -243,10 +243,10 @@ fn fpfh(
             for &(j, _) in list {
                 let j = j as usize;
                 let nj = normals[j].expect("neighbours have normals");
-                let f = pair_features(&points[i], &ni, &points[j], &nj);
-                h[bin(f[0], -std::f64::consts::PI, std::f64::consts::PI)] += step;
-                h[BINS_PER_FEATURE + bin(f[1], -1.0, 1.0)] += step;
-                h[2 * BINS_PER_FEATURE + bin(f[2], -1.0, 1.0)] += step;
+                let [y, x, alpha, phi] = pair_feature_parts(&points[i], &ni, &points[j], &nj);
+                h[theta_bin(y, x)] += step;
+                h[BINS_PER_FEATURE + bin(alpha, -1.0, 1.0)] += step;
+                h[2 * BINS_PER_FEATURE + bin(phi, -1.0, 1.0)] += step;
             }
             h
         })
@@ -290,11 +290,13 @@ const TIE: f64 = 1e-9;
 /// Bin of `v` in `[lo, hi]` cut into [`BINS_PER_FEATURE`] equal bins (the ends clamped).
 #[inline]
 fn bin(v: f64, lo: f64, hi: f64) -> usize {
-    let b = (BINS_PER_FEATURE as f64 * (v - lo) / (hi - lo)).floor();
+    let b = BINS_PER_FEATURE as f64 * (v - lo) / (hi - lo);
     if b.is_nan() {
         BINS_PER_FEATURE / 2
     } else {
-        (b.max(0.0) as usize).min(BINS_PER_FEATURE - 1)
+        // `as` truncates and saturates (negatives to 0): the floor of every b >= 0, and 0
+        // below, without a call to libm's `floor` (three a neighbour pair).
+        (b as usize).min(BINS_PER_FEATURE - 1)
     }
 }
 
@@ -302,12 +304,49 @@ fn bin(v: f64, lo: f64, hi: f64) -> usize {
 /// `ComputePairFeatures`): the frame is set at the point whose normal makes the smaller angle
 /// with the line joining them, so the result does not depend on the order of the pair.
 /// Zeros when the points coincide or a normal is along the line.
+#[cfg(test)]
 pub(super) fn pair_features(
     p1: &[f64; 3],
     n1: &[f64; 3],
     p2: &[f64; 3],
     n2: &[f64; 3],
 ) -> [f64; 3] {
+    let [y, x, alpha, phi] = pair_feature_parts(p1, n1, p2, n2);
+    [y.atan2(x), alpha, phi]
+}
+
+/// Theta's bin ([`bin`] of `atan2(y, x)` over `[-pi, pi]`) with `atan2` approximated (within
+/// 1e-5 radians, Abramowitz and Stegun 4.4.49) wherever the angle is clear of every bin edge
+/// by more than that error, else with `atan2` itself: the same bin as `atan2` gives, at a
+/// fraction of its cost (it was 5 % of a 3DLoMatch pair's time).
+#[inline]
+fn theta_bin(y: f64, x: f64) -> usize {
+    use std::f64::consts::{FRAC_PI_2, PI};
+    let (ay, ax) = (y.abs(), x.abs());
+    // NaN stays NaN here (unlike through `min` and `max`).
+    let z = if ay > ax { ax / ay } else { ay / ax };
+    let z2 = z * z;
+    let atan_z = z
+        * (0.999_866_0
+            + z2 * (-0.330_299_5 + z2 * (0.180_141_0 + z2 * (-0.085_133_0 + z2 * 0.020_835_1))));
+    // atan(|y| / |x|) in the first quadrant, then reflected into y's and x's.
+    let first = if ay > ax { FRAC_PI_2 - atan_z } else { atan_z };
+    let half = if x < 0.0 { PI - first } else { first };
+    let theta = if y.is_sign_negative() { -half } else { half };
+    let scaled = BINS_PER_FEATURE as f64 * (theta + PI) / (2.0 * PI);
+    let edge = (scaled - scaled.round()).abs();
+    // 1e-3 of a bin is 6e-4 radians, far beyond the approximation's error; NaN (0 / 0, or
+    // an infinite ratio) takes `atan2` too.
+    if edge > 1e-3 {
+        (scaled as usize).min(BINS_PER_FEATURE - 1)
+    } else {
+        bin(y.atan2(x), -PI, PI)
+    }
+}
+
+/// [`pair_features`] with theta as the two legs of its angle, `[y, x, alpha, phi]`
+/// (`theta = atan2(y, x)`; zeros where it is zero).
+fn pair_feature_parts(p1: &[f64; 3], n1: &[f64; 3], p2: &[f64; 3], n2: &[f64; 3]) -> [f64; 4] {
     let (p1, n1, p2, n2) = (
         Vector3::from(*p1),
         Vector3::from(*n1),
@@ -317,7 +356,7 @@ pub(super) fn pair_features(
     let mut dp = p2 - p1;
     let d = dp.norm();
     if d == 0.0 {
-        return [0.0; 3];
+        return [0.0; 4];
     }
     let angle1 = n1.dot(&dp) / d;
     let angle2 = n2.dot(&dp) / d;
@@ -338,13 +377,12 @@ pub(super) fn pair_features(
     let v = dp.cross(&u);
     let vn = v.norm();
     if vn == 0.0 {
-        return [0.0; 3];
+        return [0.0; 4];
     }
     let v = v / vn;
     let w = u.cross(&v);
     let alpha = v.dot(&n_other);
-    let theta = w.dot(&n_other).atan2(u.dot(&n_other));
-    [theta, alpha, phi]
+    [w.dot(&n_other), u.dot(&n_other), alpha, phi]
 }
 
 #[cfg(test)]
@@ -399,5 +437,73 @@ mod tests {
             compared > 1000 && full.iter().all(|&f| f > 10),
             "{compared} {full:?}"
         );
+    }
+
+    /// The bin is the floor of the scaled value, clamped to the ends, NaN in the middle.
+    #[test]
+    fn a_value_falls_in_the_bin_its_floor_names() {
+        let by_floor = |v: f64, lo: f64, hi: f64| {
+            let b = (BINS_PER_FEATURE as f64 * (v - lo) / (hi - lo)).floor();
+            if b.is_nan() {
+                BINS_PER_FEATURE / 2
+            } else {
+                (b.max(0.0) as usize).min(BINS_PER_FEATURE - 1)
+            }
+        };
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let pi = std::f64::consts::PI;
+        let mut values: Vec<f64> = (0..100_000).map(|_| rng.random_range(-4.0..4.0)).collect();
+        values.extend([
+            -pi,
+            pi,
+            -1.0,
+            1.0,
+            0.0,
+            -0.0,
+            -1e-300,
+            1e300,
+            -1e300,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+        ]);
+        for k in 0..=BINS_PER_FEATURE {
+            values.push(-1.0 + 2.0 * k as f64 / BINS_PER_FEATURE as f64);
+        }
+        for v in values {
+            for (lo, hi) in [(-pi, pi), (-1.0, 1.0)] {
+                assert_eq!(bin(v, lo, hi), by_floor(v, lo, hi), "{v} in [{lo}, {hi}]");
+            }
+        }
+    }
+
+    /// Theta's bin from the approximated angle is the bin of `atan2` itself: at random, at
+    /// and next to every bin edge (where the exact angle decides), at signed zeros and at
+    /// numbers that are not.
+    #[test]
+    fn theta_falls_in_the_bin_atan2_gives() {
+        use std::f64::consts::PI;
+        let exact = |y: f64, x: f64| bin(y.atan2(x), -PI, PI);
+        let mut rng = ChaCha8Rng::seed_from_u64(9);
+        let mut legs: Vec<(f64, f64)> = (0..200_000)
+            .map(|_| (rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0)))
+            .collect();
+        for k in 0..=BINS_PER_FEATURE {
+            let edge = -PI + 2.0 * PI * k as f64 / BINS_PER_FEATURE as f64;
+            for offset in [-1e-3, -1e-5, -1e-9, -1e-15, 0.0, 1e-15, 1e-9, 1e-5, 1e-3] {
+                for scale in [1e-200, 0.3, 1.0, 7e150] {
+                    let a = edge + offset;
+                    legs.push((scale * a.sin(), scale * a.cos()));
+                }
+            }
+        }
+        for y in [0.0, -0.0, 1.0, -1.0, f64::INFINITY, f64::NAN] {
+            for x in [0.0, -0.0, 1.0, -1.0, f64::NEG_INFINITY, f64::NAN] {
+                legs.push((y, x));
+            }
+        }
+        for (y, x) in legs {
+            assert_eq!(theta_bin(y, x), exact(y, x), "atan2({y}, {x})");
+        }
     }
 }
