@@ -491,16 +491,24 @@ fn consensus_hypotheses(matched: &Matched, config: &FeatureConfig) -> Vec<Hypoth
 /// Bit rows of the compatibility graph of the matches `ids`: bit `b` of row `a` is set when
 /// matches `ids[a]` and `ids[b]` (a != b) keep their distance within `tau` on both sides.
 fn compatibility(matched: &Matched, ids: &[usize], tau: f64) -> Vec<Vec<u64>> {
+    compatibility_with(matched, ids, tau, Lanes::widest())
+}
+
+/// [`compatibility`] computed by the copy `lanes` of the row test.
+fn compatibility_with(matched: &Matched, ids: &[usize], tau: f64, lanes: Lanes) -> Vec<Vec<u64>> {
     // Single precision, one coordinate at a time, so that the inner loop vectorises; about
     // the points' centroid, so that far-off coordinates (a survey's) keep their precision.
     let column = |v: &[[f64; 3]], k: usize| -> Vec<f32> {
         let centre = ids.iter().map(|&i| v[i][k]).sum::<f64>() / ids.len().max(1) as f64;
         ids.iter().map(|&i| (v[i][k] - centre) as f32).collect()
     };
-    let s = [0, 1, 2].map(|k| column(&matched.src, k));
-    let t = [0, 1, 2].map(|k| column(&matched.tgt, k));
+    let ends = MatchEnds {
+        s: [0, 1, 2].map(|k| column(&matched.src, k)),
+        t: [0, 1, 2].map(|k| column(&matched.tgt, k)),
+        tau: tau as f32,
+        lanes,
+    };
     let n = ids.len();
-    let tau = tau as f32;
     let words = n.div_ceil(64);
     // Each row from its own block of 64 on (half the work): the test is symmetric to the
     // last bit (the same squares summed in the same order), so the blocks left of the
@@ -508,28 +516,7 @@ fn compatibility(matched: &Matched, ids: &[usize], tau: f64) -> Vec<Vec<u64>> {
     let mut rows: Vec<Vec<u64>> = (0..n)
         .into_par_iter()
         .with_min_len(16)
-        .map(|a| {
-            let mut row = vec![0u64; words];
-            let mut gap = [0f32; 64];
-            for (w, word) in row.iter_mut().enumerate().skip(a / 64) {
-                let lo = w * 64;
-                let hi = (lo + 64).min(n);
-                for (b, g) in (lo..hi).zip(gap.iter_mut()) {
-                    let ds = (s[0][b] - s[0][a]).powi(2)
-                        + (s[1][b] - s[1][a]).powi(2)
-                        + (s[2][b] - s[2][a]).powi(2);
-                    let dt = (t[0][b] - t[0][a]).powi(2)
-                        + (t[1][b] - t[1][a]).powi(2)
-                        + (t[2][b] - t[2][a]).powi(2);
-                    *g = (ds.sqrt() - dt.sqrt()).abs();
-                }
-                for (k, g) in gap[..hi - lo].iter().enumerate() {
-                    *word |= u64::from(*g < tau) << k;
-                }
-            }
-            row[a / 64] &= !(1 << (a % 64));
-            row
-        })
+        .map(|a| ends.row_from_diagonal(a))
         .collect();
     // Block (rows of block a, word b) is the transpose of block (rows of block b, word a).
     for wa in 1..words {
@@ -546,6 +533,52 @@ fn compatibility(matched: &Matched, ids: &[usize], tau: f64) -> Vec<Vec<u64>> {
     }
     rows
 }
+
+/// The matches' ends as single-precision columns about their centroids, for
+/// [`compatibility`].
+struct MatchEnds {
+    s: [Vec<f32>; 3],
+    t: [Vec<f32>; 3],
+    tau: f32,
+    lanes: Lanes,
+}
+
+impl MatchEnds {
+    /// Row `a` of the compatibility bits from its own block of 64 on (the words before it
+    /// zero), its own bit cleared.
+    #[inline(always)]
+    fn row_from_diagonal_portable(&self, a: usize) -> Vec<u64> {
+        let (s, t) = (&self.s, &self.t);
+        let n = s[0].len();
+        let mut row = vec![0u64; n.div_ceil(64)];
+        let mut gap = [0f32; 64];
+        for (w, word) in row.iter_mut().enumerate().skip(a / 64) {
+            let lo = w * 64;
+            let hi = (lo + 64).min(n);
+            for (b, g) in (lo..hi).zip(gap.iter_mut()) {
+                let ds = (s[0][b] - s[0][a]).powi(2)
+                    + (s[1][b] - s[1][a]).powi(2)
+                    + (s[2][b] - s[2][a]).powi(2);
+                let dt = (t[0][b] - t[0][a]).powi(2)
+                    + (t[1][b] - t[1][a]).powi(2)
+                    + (t[2][b] - t[2][a]).powi(2);
+                *g = (ds.sqrt() - dt.sqrt()).abs();
+            }
+            for (k, g) in gap[..hi - lo].iter().enumerate() {
+                *word |= u64::from(*g < self.tau) << k;
+            }
+        }
+        row[a / 64] &= !(1 << (a % 64));
+        row
+    }
+}
+
+// `row_from_diagonal`: the portable row as compiled for the widest vectors (the same IEEE
+// operations in the same order, square roots exact in every width: the same bits).
+dispatch_by_lanes!(
+    MatchEnds,
+    fn row_from_diagonal(&self, a: usize) -> Vec<u64> => row_from_diagonal_portable
+);
 
 /// Transposes a 64 x 64 bit matrix in place: bit `j` of `m[k]` becomes bit `k` of `m[j]`
 /// (swapping ever smaller blocks: Hacker's Delight, 7-3).
@@ -968,5 +1001,10 @@ mod tests {
         }
         // The 75 inliers are all compatible with each other.
         assert!(set >= 75 * 74, "{set}");
+        // Every vector width gives the same bits (the widths this CPU lacks run narrower).
+        for lanes in [Lanes::Portable, Lanes::Avx2, Lanes::Avx512] {
+            let wide = compatibility_with(&matched, &ids, tau, lanes.on_this_cpu());
+            assert_eq!(wide, rows, "{lanes:?}");
+        }
     }
 }
