@@ -434,7 +434,11 @@ fn consensus_hypotheses(matched: &Matched, config: &FeatureConfig) -> Vec<Hypoth
     let ids: Vec<usize> = (0..m).step_by(stride).collect();
     let n = ids.len();
     let tau = config.inlier_distance;
-    let rows = compatibility(matched, &ids, tau);
+    let graph = CompatibilityGraph {
+        rows: compatibility(matched, &ids, tau),
+        lanes: Lanes::widest(),
+    };
+    let rows = &graph.rows;
     let degree: Vec<u32> = rows
         .iter()
         .map(|r| r.iter().map(|w| w.count_ones()).sum())
@@ -460,17 +464,7 @@ fn consensus_hypotheses(matched: &Matched, config: &FeatureConfig) -> Vec<Hypoth
     seeds
         .par_iter()
         .filter_map(|&a| {
-            let row = &rows[a];
-            let mut joined: Vec<(u32, usize)> = Vec::new();
-            for (w, &word) in row.iter().enumerate() {
-                let mut bits = word;
-                while bits != 0 {
-                    let b = w * 64 + bits.trailing_zeros() as usize;
-                    let shared = row.iter().zip(&rows[b]).map(|(x, y)| (x & y).count_ones());
-                    joined.push((shared.sum::<u32>(), b));
-                    bits &= bits - 1;
-                }
-            }
+            let mut joined = graph.shared_neighbours(a);
             joined.sort_by_key(|&(s, b)| (std::cmp::Reverse(s), b));
             joined.truncate(CONSENSUS_SIZE);
             let mut set: Vec<usize> = std::iter::once(a)
@@ -533,6 +527,42 @@ fn compatibility_with(matched: &Matched, ids: &[usize], tau: f64, lanes: Lanes) 
     }
     rows
 }
+
+/// The compatibility graph's bit rows ([`compatibility`]).
+struct CompatibilityGraph {
+    rows: Vec<Vec<u64>>,
+    lanes: Lanes,
+}
+
+impl CompatibilityGraph {
+    /// Each neighbour `b` of match `a` with the number of neighbours they share
+    /// (second-order compatibility), in `b`'s order.
+    #[inline(always)]
+    fn shared_neighbours_portable(&self, a: usize) -> Vec<(u32, usize)> {
+        let row = &self.rows[a];
+        let mut joined: Vec<(u32, usize)> = Vec::new();
+        for (w, &word) in row.iter().enumerate() {
+            let mut bits = word;
+            while bits != 0 {
+                let b = w * 64 + bits.trailing_zeros() as usize;
+                let shared = row
+                    .iter()
+                    .zip(&self.rows[b])
+                    .map(|(x, y)| (x & y).count_ones());
+                joined.push((shared.sum::<u32>(), b));
+                bits &= bits - 1;
+            }
+        }
+        joined
+    }
+}
+
+// `shared_neighbours`: compiled with POPCNT and wider vectors where the CPU has them (the
+// baseline x86-64 counts bits without POPCNT); integer counts, the same on every copy.
+dispatch_by_lanes!(
+    CompatibilityGraph,
+    fn shared_neighbours(&self, a: usize) -> Vec<(u32, usize)> => shared_neighbours_portable
+);
 
 /// The matches' ends as single-precision columns about their centroids, for
 /// [`compatibility`].
@@ -1005,6 +1035,28 @@ mod tests {
         for lanes in [Lanes::Portable, Lanes::Avx2, Lanes::Avx512] {
             let wide = compatibility_with(&matched, &ids, tau, lanes.on_this_cpu());
             assert_eq!(wide, rows, "{lanes:?}");
+        }
+        // Second order: the neighbours each pair of neighbours shares, counted one by one,
+        // and alike on every vector width.
+        let bit = |a: usize, b: usize| rows[a][b / 64] >> (b % 64) & 1 == 1;
+        let mut graph = CompatibilityGraph {
+            rows: rows.clone(),
+            lanes: Lanes::Portable,
+        };
+        for a in [0, 1, 63, 64, 149] {
+            let expected: Vec<(u32, usize)> = (0..150)
+                .filter(|&b| bit(a, b))
+                .map(|b| {
+                    (
+                        (0..150).filter(|&c| bit(a, c) && bit(b, c)).count() as u32,
+                        b,
+                    )
+                })
+                .collect();
+            for lanes in [Lanes::Portable, Lanes::Avx2, Lanes::Avx512] {
+                graph.lanes = lanes.on_this_cpu();
+                assert_eq!(graph.shared_neighbours(a), expected, "{lanes:?}, match {a}");
+            }
         }
     }
 }
