@@ -165,7 +165,10 @@ impl PreparedProblem {
             .ok_or(Error::Interrupted)?;
         // Stray points (far from every surface) would stretch the extent, eps and the
         // search box; farthest-point sampling always keeps them, so drop them here.
-        let sampled: Vec<PointCloud> = sampled.iter().map(|c| c.without_strays().0).collect();
+        let sampled: Vec<PointCloud> = pool.install(|| {
+            use rayon::prelude::*;
+            sampled.par_iter().map(|c| c.without_strays().0).collect()
+        });
         let centroids: Vec<[f64; 3]> = sampled.iter().map(PointCloud::centroid).collect();
         let centred: Vec<PointCloud> = sampled
             .iter()
@@ -175,11 +178,14 @@ impl PreparedProblem {
         for (i, c) in centred.iter().enumerate() {
             c.validate(&format!("cloud {} after downsampling", i + 1), 2)?;
         }
-        let d = centred
-            .iter()
-            .map(PointCloud::mean_nearest_neighbor_distance)
-            .sum::<f64>()
-            / centred.len() as f64;
+        let spacings: Vec<f64> = pool.install(|| {
+            use rayon::prelude::*;
+            centred
+                .par_iter()
+                .map(PointCloud::mean_nearest_neighbor_distance)
+                .collect()
+        });
+        let d = spacings.iter().sum::<f64>() / centred.len() as f64;
         let eps = std::f64::consts::FRAC_1_SQRT_2 * d;
         let shift = centred
             .iter()
@@ -205,7 +211,9 @@ impl PreparedProblem {
             clouds
                 .par_iter()
                 .zip(&centroids)
-                .map(|(c, m)| RefineCloud::new(c.translated([-m[0], -m[1], -m[2]]).into_points()))
+                .map(|(c, m)| {
+                    RefineCloud::new(c.translated([-m[0], -m[1], -m[2]]).into_points(), eps)
+                })
                 .collect()
         });
         interrupt.check()?;

@@ -7,7 +7,7 @@
 
 use crate::graph::Edge;
 use crate::se3::Rigid;
-use crate::search::QueryAnchor;
+use crate::search::{LastQuery, NearestGrid};
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use nalgebra::{DMatrix, DVector, Matrix3, SMatrix, SVector, Vector3};
 use rayon::prelude::*;
@@ -15,6 +15,9 @@ use rayon::prelude::*;
 /// Surface points kept per cloud for the refinement at most (a deterministic stride subset);
 /// they are both the sources and the targets of the ICP.
 const MAX_SURFACE_POINTS: usize = 8000;
+
+/// The joint ICP's first trim, in units of eps: a match farther apart is dropped.
+const START_TRIM_EPS: f64 = 3.0;
 /// Iterations over which the trim shrinks (at most half of them).
 const SHRINK_ITERATIONS: usize = 5;
 /// The joint ICP has converged when a step at the final trim turns no cloud by more than
@@ -140,7 +143,8 @@ impl NormalEquations {
 /// normal, which otherwise biases the ICP (centred like the cloud's sample).
 #[derive(Debug)]
 pub(crate) struct RefineCloud {
-    tree: ImmutableKdTree<f64, 3>,
+    /// The points' grid for the nearest point within [`START_TRIM_EPS`] eps.
+    grid: NearestGrid,
     points: Vec<[f64; 3]>,
     /// Unit normal of each point (sign arbitrary).
     normals: Vec<[f64; 3]>,
@@ -255,12 +259,14 @@ impl RefineCloud {
         &self.normals
     }
 
-    /// A KD-tree of the points.
-    pub fn tree(&self) -> &ImmutableKdTree<f64, 3> {
-        &self.tree
+    /// The points' grid: the nearest point within [`START_TRIM_EPS`] times the `eps` the cloud
+    /// was made for, exactly (the ICP's widest trim; the verdict asks within eps).
+    pub fn grid(&self) -> &NearestGrid {
+        &self.grid
     }
 
-    pub fn new(mut points: Vec<[f64; 3]>) -> RefineCloud {
+    /// The surface points of `points` for a problem of inlier radius `eps`.
+    pub fn new(mut points: Vec<[f64; 3]>, eps: f64) -> RefineCloud {
         if points.len() > MAX_FIT_POINTS {
             let stride = points.len().div_ceil(MAX_FIT_POINTS);
             points = points.into_iter().step_by(stride).collect();
@@ -286,7 +292,7 @@ impl RefineCloud {
         let self_residual = self_residual(&points, &normals);
         let spacing = median_spacing(&tree, &points);
         RefineCloud {
-            tree,
+            grid: NearestGrid::new(&points, START_TRIM_EPS * eps),
             points,
             normals,
             self_residual,
@@ -374,7 +380,7 @@ pub(crate) fn refine_poses(
     if poses.len() < 2 {
         return poses;
     }
-    let start_trim = 3.0 * eps;
+    let start_trim = START_TRIM_EPS * eps;
     let spacing = clouds.iter().map(|c| c.spacing).sum::<f64>() / clouds.len().max(1) as f64;
     let final_trim = if spacing > 0.0 {
         (FINAL_TRIM_SPACINGS * spacing).min(start_trim)
@@ -393,11 +399,18 @@ pub(crate) fn refine_poses(
                 .max(f64::MIN_POSITIVE)
         })
         .collect();
+    // The nearest point within the trim (never wider than at the start) from each target
+    // cloud's grid, in less time than a KD-tree finds the nearest point at any distance; a
+    // cloud made for a smaller eps than this one gets a grid of its own here.
+    let own_grids: Vec<Option<NearestGrid>> = clouds
+        .iter()
+        .map(|c| (c.grid.reach() < start_trim).then(|| NearestGrid::new(&c.points, start_trim)))
+        .collect();
     // Per direction and source point: its last query in the target's frame (a point
     // certainly still beyond the trim gets no match without a query).
-    let mut anchors: Vec<Vec<QueryAnchor>> = directions
+    let mut anchors: Vec<Vec<LastQuery>> = directions
         .iter()
-        .map(|&(i, _)| vec![QueryAnchor::NONE; clouds[i].points.len()])
+        .map(|&(i, _)| vec![LastQuery::NONE; clouds[i].points.len()])
         .collect();
     for it in 0..iterations {
         if stop() {
@@ -417,10 +430,10 @@ pub(crate) fn refine_poses(
         let mut h = DMatrix::<f64>::zeros(unknowns, unknowns);
         let mut g = DVector::<f64>::zeros(unknowns);
         let mut matched = 0usize;
-        let trim = max_d2.sqrt();
         for ((&(i, j), anchors), &scale) in directions.iter().zip(&mut anchors).zip(&robust_scales)
         {
             let to_j = compose(&poses[j].inverse(), &poses[i]);
+            let grid = own_grids[j].as_ref().unwrap_or(&clouds[j].grid);
             let rj = &poses[j].r;
             // Each fixed block of source points is matched and summed on its own, the blocks
             // then in order: the same sums for any number of threads, and the summing (half
@@ -434,19 +447,9 @@ pub(crate) fn refine_poses(
                         let mut sums = NormalEquations::default();
                         for (p, anchor) in points.iter().zip(anchors) {
                             let q = to_j.apply(p);
-                            if anchor.still_beyond(&q, trim) {
+                            let Some((m, _)) = grid.nearest_from(&q, max_d2, anchor) else {
                                 continue;
-                            }
-                            let nn = clouds[j]
-                                .tree
-                                .query(&q)
-                                .nearest_one::<SquaredEuclidean<f64>>()
-                                .execute();
-                            anchor.set(q, nn.distance.sqrt());
-                            if nn.distance > max_d2 {
-                                continue;
-                            }
-                            let m = nn.item as usize;
+                            };
                             let n = clouds[j].normals[m];
                             let n: [f64; 3] = std::array::from_fn(|a| {
                                 rj[a][0] * n[0] + rj[a][1] * n[1] + rj[a][2] * n[2]
@@ -578,7 +581,7 @@ mod tests {
     /// The worst rotation error (degrees, against the identity: the truth of [`strips`]) after
     /// 40 joint ICP steps on 2 threads from [`misaligned_start`] around a ring of the strips.
     fn worst_degrees_after_refining(strips: [Vec<[f64; 3]>; 3], eps: f64) -> f64 {
-        let clouds = strips.map(RefineCloud::new);
+        let clouds = strips.map(|s| RefineCloud::new(s, eps));
         let clouds: Vec<&RefineCloud> = clouds.iter().collect();
         let ring = crate::graph::ViewGraph::ring(3).unwrap();
         let est = refine_poses(
@@ -662,7 +665,7 @@ mod tests {
         for p in c.iter_mut().filter(|p| (0.0..0.3).contains(&p[1])) {
             p[2] += 0.03;
         }
-        let spacing = RefineCloud::new(a.clone()).spacing;
+        let spacing = RefineCloud::new(a.clone(), 0.04).spacing;
         assert!((0.005..0.012).contains(&spacing), "spacing {spacing}");
         let worst = worst_degrees_after_refining([a, b, c], 0.04);
         assert!(worst < 0.05, "{worst} deg");
@@ -684,19 +687,19 @@ mod tests {
     #[test]
     fn repeated_or_stray_points_do_not_change_the_spacing_much() {
         let [points, _, _] = strips(4, 0.0);
-        let once = RefineCloud::new(points.clone()).spacing;
-        let twice = RefineCloud::new(points.iter().flat_map(|p| [*p, *p]).collect()).spacing;
+        let once = RefineCloud::new(points.clone(), 0.02).spacing;
+        let twice = RefineCloud::new(points.iter().flat_map(|p| [*p, *p]).collect(), 0.02).spacing;
         assert!(once > 0.0 && twice > 0.0, "{once} {twice}");
         let mut with_stray = points.clone();
         with_stray.push([50.0, 0.0, 0.0]);
-        let stray = RefineCloud::new(with_stray).spacing;
+        let stray = RefineCloud::new(with_stray, 0.02).spacing;
         assert!((stray - once).abs() < 0.01 * once, "{once} {stray}");
     }
 
     #[test]
     fn refinement_of_one_cloud_or_none_returns_the_poses() {
         let [points, _, _] = strips(3, 0.0);
-        let cloud = RefineCloud::new(points);
+        let cloud = RefineCloud::new(points, 0.02);
         let pose = Rigid::from_individual(&[0.0; 6]);
         let pool = two_threads();
         let one = refine_poses(&[&cloud], &[], vec![pose], 0.02, 5, &pool, &|| false);
@@ -706,7 +709,7 @@ mod tests {
 
     #[test]
     fn joint_refinement_corrects_small_misalignments_and_closes_the_loop() {
-        let clouds = strips(2, 0.0).map(RefineCloud::new);
+        let clouds = strips(2, 0.0).map(|s| RefineCloud::new(s, 0.02));
         let ring = crate::graph::ViewGraph::ring(3).unwrap();
         let (pool, start) = (two_threads(), misaligned_start());
         let clouds: Vec<&RefineCloud> = clouds.iter().collect();
@@ -741,5 +744,20 @@ mod tests {
             est,
             "thread count changes nothing"
         );
+        // Clouds made for a smaller eps (their grids reach too short for this trim) are
+        // refined as if made for this one.
+        let short = strips(2, 0.0).map(|s| RefineCloud::new(s, 0.001));
+        assert!(short[0].grid().reach() < START_TRIM_EPS * 0.02);
+        let short: Vec<&RefineCloud> = short.iter().collect();
+        let from_short = refine_poses(
+            &short,
+            ring.edges(),
+            start.to_vec(),
+            0.02,
+            40,
+            &pool,
+            &|| false,
+        );
+        assert_eq!(from_short, est);
     }
 }

@@ -14,7 +14,6 @@
 use crate::graph::Edge;
 use crate::refine::RefineCloud;
 use crate::se3::Rigid;
-use kiddo::SquaredEuclidean;
 use rayon::prelude::*;
 
 /// An edge is trusted only if at least this fraction of its points overlap.
@@ -253,16 +252,9 @@ pub(crate) fn check_edge(
             .with_min_len(256)
             .filter_map(|p| {
                 let q = to_t.apply(p);
-                let nn = dst
-                    .tree()
-                    .query(&q)
-                    .nearest_one::<SquaredEuclidean<f64>>()
-                    .execute();
-                (nn.distance <= eps * eps).then(|| {
-                    let m = nn.item as usize;
-                    let (y, n) = (dst.points()[m], dst.normals()[m]);
-                    (0..3).map(|k| n[k] * (q[k] - y[k])).sum::<f64>().abs() / eps
-                })
+                let (m, _) = dst.grid().nearest_within(&q, eps * eps).hit?;
+                let (y, n) = (dst.points()[m], dst.normals()[m]);
+                Some((0..3).map(|k| n[k] * (q[k] - y[k])).sum::<f64>().abs() / eps)
             })
             .collect();
         (residuals.len(), src.points().len(), residuals)

@@ -3,10 +3,9 @@
 use super::{Descriptor, FeatureConfig, Features, NormalOrientation, BINS_PER_FEATURE};
 use super::{DESCRIPTOR_LEN as LEN, MIN_KEYPOINTS};
 use crate::refine::plane_fit;
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use crate::search::NearestGrid;
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
-use std::num::NonZero;
 
 /// A cloud whose keypoints are thinner than this many voxels in their thinnest direction
 /// (the square root of the smallest covariance eigenvalue) is flat or linear: its features
@@ -25,10 +24,7 @@ pub(super) fn describe(points: &[[f64; 3]], config: &FeatureConfig) -> Features 
     {
         return Features::default();
     }
-    let Ok(tree) = ImmutableKdTree::<f64, 3>::new_from_slice(&keypoints) else {
-        return Features::default();
-    };
-    let near = neighbourhoods(&tree, &keypoints, config);
+    let near = neighbourhoods(&keypoints, config);
     let normals = normals(&keypoints, &near, config);
     let descriptors = fpfh(&keypoints, &near, &normals, config);
     let mut out = Features::default();
@@ -127,30 +123,30 @@ pub fn pca_diagonal(points: &[[f64; 3]]) -> f64 {
     (0..3).map(|k| (hi[k] - lo[k]).powi(2)).sum::<f64>().sqrt()
 }
 
-/// Each keypoint's neighbours (index, squared distance; itself included), nearest first:
-/// those within the larger of the normals' and the features' radius, at most the larger of
-/// their counts. One query serves both: each takes the prefix it needs ([`within`]).
-fn neighbourhoods(
-    tree: &ImmutableKdTree<f64, 3>,
-    points: &[[f64; 3]],
-    config: &FeatureConfig,
-) -> Vec<Vec<(u32, f64)>> {
+/// Each keypoint's neighbours (index, squared distance; itself included), nearest first
+/// (equally near ones by index): those within the larger of the normals' and the features'
+/// radius, at most the larger of their counts. One query serves both: each takes the prefix
+/// it needs ([`within`]). A grid of cells as wide as the radius finds them (the 27 cells
+/// around a keypoint hold them all) in less time than a KD-tree's nearest-n query.
+fn neighbourhoods(points: &[[f64; 3]], config: &FeatureConfig) -> Vec<Vec<(u32, f64)>> {
     let most = config
         .normal_max_neighbours
         .max(config.feature_max_neighbours);
-    let k = NonZero::new(most).expect("validated >= 3");
     let radius = config.normal_radius.max(config.feature_radius);
+    let grid = NearestGrid::new(points, radius);
+    let nearer = |a: &(u32, f64), b: &(u32, f64)| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0));
     points
         .par_iter()
         .with_min_len(64)
         .map(|p| {
-            tree.query(p)
-                .nearest_n::<SquaredEuclidean<f64>>(k)
-                .within(radius * radius)
-                .execute()
-                .iter()
-                .map(|r| (r.item, r.distance))
-                .collect()
+            let mut hood = Vec::new();
+            grid.all_within(p, radius * radius, &mut hood);
+            if hood.len() > most {
+                hood.select_nth_unstable_by(most - 1, nearer);
+                hood.truncate(most);
+            }
+            hood.sort_unstable_by(nearer);
+            hood
         })
         .collect()
 }
@@ -388,8 +384,10 @@ fn pair_feature_parts(p1: &[f64; 3], n1: &[f64; 3], p2: &[f64; 3], n2: &[f64; 3]
 #[cfg(test)]
 mod tests {
     use super::*;
+    use kiddo::{ImmutableKdTree, SquaredEuclidean};
     use rand::{RngExt, SeedableRng};
     use rand_chacha::ChaCha8Rng;
+    use std::num::NonZero;
 
     /// The normal and the FPFH each take a prefix of one neighbourhood query; each prefix must
     /// be what a query of its own radius and count finds, in the same order (the plane fit and
@@ -408,7 +406,7 @@ mod tests {
         points.extend((0..300).map(|_| std::array::from_fn(|_| rng.random_range(0.0..2.0))));
         let config = FeatureConfig::for_spacing(0.02);
         let tree = ImmutableKdTree::<f64, 3>::new_from_slice(&points).expect("a tree");
-        let near = neighbourhoods(&tree, &points, &config);
+        let near = neighbourhoods(&points, &config);
         let (mut full, mut compared) = ([0, 0], 0);
         for (p, hood) in points.iter().zip(&near).step_by(7) {
             for (k, (radius, count)) in [

@@ -15,6 +15,7 @@ use crate::cloud::bounds;
 const MAX_CELLS: usize = 1 << 22;
 
 /// A cloud's points sorted into cells of side `cell` (at least the radius it was built for).
+#[derive(Debug)]
 pub(crate) struct NearestGrid {
     origin: [f64; 3],
     /// The points' bounding box is `origin..=top`.
@@ -106,6 +107,12 @@ impl NearestGrid {
         }
     }
 
+    /// The largest radius the grid answers for exactly (its cell size, at least the radius it
+    /// was built for).
+    pub(crate) fn reach(&self) -> f64 {
+        self.cell
+    }
+
     /// The nearest point to `q` when within the cell size (of equally near points, the one
     /// met first), else a lower bound of its distance.
     #[inline]
@@ -143,46 +150,18 @@ impl NearestGrid {
                 distance: outside,
             };
         }
-        // The cells the sphere touches (clipped to the grid); its rows along x are contiguous
-        // in `points`. (Searching q's own cell first and skipping the cells farther than the
-        // best so far was slower: 44 s instead of 36 s for the screening of a 38-fragment
-        // room.) `bound`: how far q is from the searched block's faces, where points may lie
-        // beyond them. (Truncation is the floor of these non-negative cell coordinates, and
-        // unlike `floor` needs no call to libm on the baseline x86-64.)
-        let mut range = [(0usize, 0usize); 3];
-        let mut bound = f64::INFINITY;
-        for a in 0..3 {
-            let x = (q[a] - self.origin[a]) / self.cell;
-            // (A millionth of a cell more: rounding never leaves out a point's cell.)
-            let span = reach / self.cell + 1e-6;
-            let (low, high) = (x - span, x + span);
-            let first = if low > 0.0 { low as usize } else { 0 };
-            let last = if high >= 0.0 {
-                (high as usize).min(self.dims[a] - 1)
-            } else {
-                0
+        // (Searching q's own cell first and skipping the cells farther than the best so far
+        // was slower: 44 s instead of 36 s for the screening of a 38-fragment room.)
+        let Some((range, bound)) = self.block(q, reach) else {
+            return Nearest {
+                hit: None,
+                distance: reach,
             };
-            if high < 0.0 || last < first {
-                return Nearest {
-                    hit: None,
-                    distance: reach,
-                };
-            }
-            if first > 0 {
-                bound = bound.min(q[a] - (self.origin[a] + first as f64 * self.cell));
-            }
-            if last < self.dims[a] - 1 {
-                bound = bound.min(self.origin[a] + (last + 1) as f64 * self.cell - q[a]);
-            }
-            range[a] = (first, last);
-        }
+        };
         let mut best: Option<(usize, f64)> = None;
         for z in range[2].0..=range[2].1 {
             for y in range[1].0..=range[1].1 {
-                let row = (z * self.dims[1] + y) * self.dims[0];
-                let from = self.starts[row + range[0].0] as usize;
-                let to = self.starts[row + range[0].1 + 1] as usize;
-                for (p, i) in &self.points[from..to] {
+                for (p, i) in self.row(&range, y, z) {
                     let d = dist2(q, p);
                     if best.is_none_or(|(_, b)| d < b) {
                         best = Some((*i as usize, d));
@@ -207,6 +186,73 @@ impl NearestGrid {
             },
         }
     }
+
+    /// Every point within `sqrt(radius2)` of `q` (at most the cell size), as `(index, squared
+    /// distance)`, appended to `out` in no particular order; none for a non-finite `q`.
+    pub(crate) fn all_within(&self, q: &[f64; 3], radius2: f64, out: &mut Vec<(u32, f64)>) {
+        if !q.iter().all(|v| v.is_finite()) {
+            return;
+        }
+        let radius2 = radius2.min(self.cell * self.cell);
+        let reach = radius2.sqrt() * (1.0 + 1e-12);
+        let Some((range, _)) = self.block(q, reach) else {
+            return;
+        };
+        for z in range[2].0..=range[2].1 {
+            for y in range[1].0..=range[1].1 {
+                for (p, i) in self.row(&range, y, z) {
+                    let d = dist2(q, p);
+                    if d <= radius2 {
+                        out.push((*i, d));
+                    }
+                }
+            }
+        }
+    }
+
+    /// The block of cells (an inclusive range per axis, clipped to the grid) that a sphere of
+    /// radius `reach` around `q` touches, and how far `q` is from the block's faces where
+    /// points may lie beyond them; `None` when the sphere misses the grid. (Truncation is the
+    /// floor of these non-negative cell coordinates, and unlike `floor` needs no call to libm
+    /// on the baseline x86-64.)
+    #[inline]
+    fn block(&self, q: &[f64; 3], reach: f64) -> Option<([(usize, usize); 3], f64)> {
+        let mut range = [(0usize, 0usize); 3];
+        let mut bound = f64::INFINITY;
+        for a in 0..3 {
+            let x = (q[a] - self.origin[a]) / self.cell;
+            // (A millionth of a cell more: rounding never leaves out a point's cell.)
+            let span = reach / self.cell + 1e-6;
+            let (low, high) = (x - span, x + span);
+            let first = if low > 0.0 { low as usize } else { 0 };
+            let last = if high >= 0.0 {
+                (high as usize).min(self.dims[a] - 1)
+            } else {
+                0
+            };
+            if high < 0.0 || last < first {
+                return None;
+            }
+            if first > 0 {
+                bound = bound.min(q[a] - (self.origin[a] + first as f64 * self.cell));
+            }
+            if last < self.dims[a] - 1 {
+                bound = bound.min(self.origin[a] + (last + 1) as f64 * self.cell - q[a]);
+            }
+            range[a] = (first, last);
+        }
+        Some((range, bound))
+    }
+
+    /// The points of the block's row `(y, z)` along x, contiguous in `points`.
+    #[inline]
+    fn row(&self, range: &[(usize, usize); 3], y: usize, z: usize) -> &[([f64; 3], u32)] {
+        let row = (z * self.dims[1] + y) * self.dims[0];
+        let from = self.starts[row + range[0].0] as usize;
+        let to = self.starts[row + range[0].1 + 1] as usize;
+        &self.points[from..to]
+    }
+
     /// The nearest point to `q` when its squared distance is at most `radius2`, as
     /// [`NearestGrid::nearest_within`] finds it, knowing where the same point was last
     /// queried (`last`, updated). A point certainly still beyond the radius needs no search;
