@@ -21,6 +21,7 @@
 //! the other saw, break it: their right pose is then not searched and is doubted (give such
 //! scans no viewpoints).
 
+use crate::angle::{atan2_approx, clear_of_edges};
 use crate::cloud::PointCloud;
 use crate::se3::Rigid;
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
@@ -163,10 +164,22 @@ impl Panorama {
         if range.is_nan() || range <= 0.0 {
             return None;
         }
-        let azimuth = d[1].atan2(d[0]) + std::f64::consts::PI;
-        let elevation = (d[2] / range).clamp(-1.0, 1.0).asin() + std::f64::consts::FRAC_PI_2;
-        let c = ((azimuth / self.cell) as usize).min(self.columns - 1);
-        let r = ((elevation / self.cell) as usize).min(self.rows - 1);
+        use std::f64::consts::{FRAC_PI_2, PI};
+        // The cheap angles where they are clear of every cell's edge (almost always), libm's
+        // elsewhere: the same cells either way.
+        let fast_column = (atan2_approx(d[1], d[0]) + PI) / self.cell;
+        let fast_row =
+            (atan2_approx(d[2], (d[0] * d[0] + d[1] * d[1]).sqrt()) + FRAC_PI_2) / self.cell;
+        let (column, row) =
+            if clear_of_edges(fast_column, self.cell) && clear_of_edges(fast_row, self.cell) {
+                (fast_column, fast_row)
+            } else {
+                let azimuth = d[1].atan2(d[0]) + PI;
+                let elevation = (d[2] / range).clamp(-1.0, 1.0).asin() + FRAC_PI_2;
+                (azimuth / self.cell, elevation / self.cell)
+            };
+        let c = (column as usize).min(self.columns - 1);
+        let r = (row as usize).min(self.rows - 1);
         Some((c, r, range))
     }
 
@@ -325,6 +338,50 @@ pub(crate) mod tests {
         m[(1, 3)] = shift[1];
         m[(2, 3)] = shift[2];
         Rigid::from_matrix(&m)
+    }
+
+    /// The cheap angles put every point in the cell that libm's angles put it in, points on
+    /// and a hair off the cells' edges included.
+    #[test]
+    fn a_point_falls_in_the_cell_its_exact_angles_name() {
+        use rand::{RngExt, SeedableRng};
+        use std::f64::consts::{FRAC_PI_2, PI};
+        let space = Panorama::new(&corner(), [0.1, 0.2, -0.3]).expect("a panorama");
+        let exact = |p: &[f64; 3]| {
+            let d = space.axes * (Vector3::from(*p) - space.viewpoint);
+            let range = d.norm();
+            let azimuth = d[1].atan2(d[0]) + PI;
+            let elevation = (d[2] / range).clamp(-1.0, 1.0).asin() + FRAC_PI_2;
+            let c = ((azimuth / space.cell) as usize).min(space.columns - 1);
+            let r = ((elevation / space.cell) as usize).min(space.rows - 1);
+            (c, r, range)
+        };
+        // Directions in the panorama's own axes, at and around its cells' edges, and random.
+        let back = space.axes.transpose();
+        let mut points = Vec::new();
+        let at = |azimuth: f64, elevation: f64, range: f64| {
+            let d = Vector3::new(
+                elevation.cos() * azimuth.cos(),
+                elevation.cos() * azimuth.sin(),
+                elevation.sin(),
+            ) * range;
+            let p = back * d + space.viewpoint;
+            [p[0], p[1], p[2]]
+        };
+        for k in 0..=space.columns.max(space.rows) {
+            let edge = k as f64 * space.cell;
+            for offset in [-1e-4, -1e-5, -1e-9, 0.0, 1e-9, 1e-5, 1e-4] {
+                for range in [0.5, 3.0] {
+                    points.push(at(edge + offset - PI, 0.3, range));
+                    points.push(at(1.0, edge + offset - FRAC_PI_2, range));
+                }
+            }
+        }
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
+        points.extend((0..100_000).map(|_| std::array::from_fn(|_| rng.random_range(-4.0..4.0))));
+        for p in &points {
+            assert_eq!(space.cell_of(p), Some(exact(p)), "{p:?}");
+        }
     }
 
     #[test]

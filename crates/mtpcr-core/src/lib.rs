@@ -28,6 +28,7 @@
 //! ```
 #![warn(missing_docs)]
 
+mod angle;
 pub mod cloud;
 pub mod config;
 mod ea;

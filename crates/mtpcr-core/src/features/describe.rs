@@ -2,6 +2,7 @@
 
 use super::{Descriptor, FeatureConfig, Features, NormalOrientation, BINS_PER_FEATURE};
 use super::{DESCRIPTOR_LEN as LEN, MIN_KEYPOINTS};
+use crate::angle::{atan2_approx, clear_of_edges};
 use crate::refine::plane_fit;
 use crate::search::NearestGrid;
 use nalgebra::{Matrix3, Vector3};
@@ -134,19 +135,22 @@ fn neighbourhoods(points: &[[f64; 3]], config: &FeatureConfig) -> Vec<Vec<(u32, 
         .max(config.feature_max_neighbours);
     let radius = config.normal_radius.max(config.feature_radius);
     let grid = NearestGrid::new(points, radius);
-    let nearer = |a: &(u32, f64), b: &(u32, f64)| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0));
     points
         .par_iter()
         .with_min_len(64)
         .map(|p| {
-            let mut hood = Vec::new();
-            grid.all_within(p, radius * radius, &mut hood);
+            // Sorted by (squared distance, index), the distance's bits standing in for it
+            // (non-negative floats order as their bits do): a plain sort of integer pairs.
+            let mut hood: Vec<(u64, u32)> = Vec::new();
+            grid.each_within(p, radius * radius, |i, d2| hood.push((d2.to_bits(), i)));
             if hood.len() > most {
-                hood.select_nth_unstable_by(most - 1, nearer);
+                hood.select_nth_unstable(most - 1);
                 hood.truncate(most);
             }
-            hood.sort_unstable_by(nearer);
-            hood
+            hood.sort_unstable();
+            hood.into_iter()
+                .map(|(d2, i)| (i, f64::from_bits(d2)))
+                .collect()
         })
         .collect()
 }
@@ -311,29 +315,16 @@ pub(super) fn pair_features(
     [y.atan2(x), alpha, phi]
 }
 
-/// Theta's bin ([`bin`] of `atan2(y, x)` over `[-pi, pi]`) with `atan2` approximated (within
-/// 1e-5 radians, Abramowitz and Stegun 4.4.49) wherever the angle is clear of every bin edge
-/// by more than that error, else with `atan2` itself: the same bin as `atan2` gives, at a
-/// fraction of its cost (it was 5 % of a 3DLoMatch pair's time).
+/// Theta's bin ([`bin`] of `atan2(y, x)` over `[-pi, pi]`) from [`atan2_approx`] wherever the
+/// angle is clear of every bin edge by more than its error, else from `atan2` itself: the
+/// same bin as `atan2` gives, at a fraction of its cost (it was 5 % of a 3DLoMatch pair's
+/// time).
 #[inline]
 fn theta_bin(y: f64, x: f64) -> usize {
-    use std::f64::consts::{FRAC_PI_2, PI};
-    let (ay, ax) = (y.abs(), x.abs());
-    // NaN stays NaN here (unlike through `min` and `max`).
-    let z = if ay > ax { ax / ay } else { ay / ax };
-    let z2 = z * z;
-    let atan_z = z
-        * (0.999_866_0
-            + z2 * (-0.330_299_5 + z2 * (0.180_141_0 + z2 * (-0.085_133_0 + z2 * 0.020_835_1))));
-    // atan(|y| / |x|) in the first quadrant, then reflected into y's and x's.
-    let first = if ay > ax { FRAC_PI_2 - atan_z } else { atan_z };
-    let half = if x < 0.0 { PI - first } else { first };
-    let theta = if y.is_sign_negative() { -half } else { half };
-    let scaled = BINS_PER_FEATURE as f64 * (theta + PI) / (2.0 * PI);
-    let edge = (scaled - scaled.round()).abs();
-    // 1e-3 of a bin is 6e-4 radians, far beyond the approximation's error; NaN (0 / 0, or
-    // an infinite ratio) takes `atan2` too.
-    if edge > 1e-3 {
+    use std::f64::consts::PI;
+    let width = 2.0 * PI / BINS_PER_FEATURE as f64;
+    let scaled = (atan2_approx(y, x) + PI) / width;
+    if clear_of_edges(scaled, width) {
         (scaled as usize).min(BINS_PER_FEATURE - 1)
     } else {
         bin(y.atan2(x), -PI, PI)

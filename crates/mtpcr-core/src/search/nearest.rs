@@ -187,9 +187,10 @@ impl NearestGrid {
         }
     }
 
-    /// Every point within `sqrt(radius2)` of `q` (at most the cell size), as `(index, squared
-    /// distance)`, appended to `out` in no particular order; none for a non-finite `q`.
-    pub(crate) fn all_within(&self, q: &[f64; 3], radius2: f64, out: &mut Vec<(u32, f64)>) {
+    /// Every point within `sqrt(radius2)` of `q` (at most the cell size), given to `visit` as
+    /// (index, squared distance) in no particular order; none for a non-finite `q`.
+    #[inline]
+    pub(crate) fn each_within(&self, q: &[f64; 3], radius2: f64, mut visit: impl FnMut(u32, f64)) {
         if !q.iter().all(|v| v.is_finite()) {
             return;
         }
@@ -203,7 +204,7 @@ impl NearestGrid {
                 for (p, i) in self.row(&range, y, z) {
                     let d = dist2(q, p);
                     if d <= radius2 {
-                        out.push((*i, d));
+                        visit(*i, d);
                     }
                 }
             }
