@@ -325,7 +325,9 @@ pub(crate) fn doubts(edges: &[EdgeCheck]) -> Vec<Option<String>> {
                 ))
             } else if let Some(why) = cue_doubt(e, &name) {
                 Some(why)
-            } else if typical.is_some_and(|m| e.residual > RELATIVE_RESIDUAL * m) {
+            } else if e.residual > NEGLIGIBLE_RESIDUAL
+                && typical.is_some_and(|m| e.residual > RELATIVE_RESIDUAL * m)
+            {
                 Some(format!(
                     "clouds {name} lie on each other far less closely than the other pairs (residual {:.3} of eps against a median of {:.3})",
                     e.residual,
@@ -575,6 +577,18 @@ mod tests {
         let d = doubts(&edges);
         assert_eq!((d[0].is_some(), d[1].is_some()), (false, false));
         assert!(d[2].as_ref().unwrap().contains("far less closely"), "{d:?}");
+        // Scans lying exactly on their planes (synthetic ones) have residuals of rounding
+        // error, whose ratios mean nothing.
+        let exact = [
+            edge(0.8, 1e-17, 0.0),
+            edge(0.8, 2e-17, 0.0),
+            edge(0.8, 3e-16, 0.0),
+        ];
+        assert!(
+            doubts(&exact).iter().all(Option::is_none),
+            "{:?}",
+            doubts(&exact)
+        );
     }
 
     #[test]
