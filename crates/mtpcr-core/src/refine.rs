@@ -709,19 +709,26 @@ mod tests {
 
     #[test]
     fn joint_refinement_corrects_small_misalignments_and_closes_the_loop() {
-        let clouds = strips(2, 0.0).map(|s| RefineCloud::new(s, 0.02));
         let ring = crate::graph::ViewGraph::ring(3).unwrap();
-        let (pool, start) = (two_threads(), misaligned_start());
-        let clouds: Vec<&RefineCloud> = clouds.iter().collect();
-        let est = refine_poses(
-            &clouds,
-            ring.edges(),
-            start.to_vec(),
-            0.02,
-            40,
-            &pool,
-            &|| false,
-        );
+        let start = misaligned_start();
+        // 40 steps around the ring at eps 0.02 of the strips' clouds made for `made_eps`.
+        let refined = |made_eps: f64, pool: &rayon::ThreadPool| {
+            let clouds = strips(2, 0.0).map(|s| RefineCloud::new(s, made_eps));
+            if made_eps < 0.02 {
+                assert!(clouds[0].grid().reach() < START_TRIM_EPS * 0.02);
+            }
+            let clouds: Vec<&RefineCloud> = clouds.iter().collect();
+            refine_poses(
+                &clouds,
+                ring.edges(),
+                start.to_vec(),
+                0.02,
+                40,
+                pool,
+                &|| false,
+            )
+        };
+        let est = refined(0.02, &two_threads());
         let ident = Rigid::from_individual(&[0.0; 6]).to_matrix();
         for pose in &est {
             assert!(rotation_error_deg(&pose.to_matrix(), &ident) < 0.05);
@@ -731,33 +738,9 @@ mod tests {
             .num_threads(1)
             .build()
             .unwrap();
-        assert_eq!(
-            refine_poses(
-                &clouds,
-                ring.edges(),
-                start.to_vec(),
-                0.02,
-                40,
-                &one,
-                &|| false
-            ),
-            est,
-            "thread count changes nothing"
-        );
+        assert_eq!(refined(0.02, &one), est, "thread count changes nothing");
         // Clouds made for a smaller eps (their grids reach too short for this trim) are
         // refined as if made for this one.
-        let short = strips(2, 0.0).map(|s| RefineCloud::new(s, 0.001));
-        assert!(short[0].grid().reach() < START_TRIM_EPS * 0.02);
-        let short: Vec<&RefineCloud> = short.iter().collect();
-        let from_short = refine_poses(
-            &short,
-            ring.edges(),
-            start.to_vec(),
-            0.02,
-            40,
-            &pool,
-            &|| false,
-        );
-        assert_eq!(from_short, est);
+        assert_eq!(refined(0.001, &one), est);
     }
 }
