@@ -243,6 +243,8 @@ pub(crate) fn check_edge(
     t_target_source: &Rigid,
     eps: f64,
 ) -> EdgeCheck {
+    // The clouds' grids answer exactly only within their reach (three eps they were made for).
+    debug_assert!(clouds.iter().all(|c| eps <= c.grid().reach()));
     // In the current rayon pool; the residuals keep the points' order whatever its size.
     let one_way = |s: usize, t: usize, to_t: Rigid| -> (usize, usize, Vec<f64>) {
         let (src, dst) = (&clouds[s], &clouds[t]);

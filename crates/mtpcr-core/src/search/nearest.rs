@@ -132,9 +132,7 @@ impl NearestGrid {
                 distance: f64::NEG_INFINITY,
             };
         }
-        let radius2 = radius2.min(self.cell * self.cell);
-        // A hair wider than the radius, so that no cell holding a point within it is missed.
-        let reach = radius2.sqrt() * (1.0 + 1e-12);
+        let (radius2, reach) = self.search_radius(radius2);
         // Every point lies in the bounding box: a query far outside it needs no search, and
         // its distance to the box stays a lower bound for the next queries nearby.
         let outside = (0..3)
@@ -194,8 +192,7 @@ impl NearestGrid {
         if !q.iter().all(|v| v.is_finite()) {
             return;
         }
-        let radius2 = radius2.min(self.cell * self.cell);
-        let reach = radius2.sqrt() * (1.0 + 1e-12);
+        let (radius2, reach) = self.search_radius(radius2);
         let Some((range, _)) = self.block(q, reach) else {
             return;
         };
@@ -209,6 +206,15 @@ impl NearestGrid {
                 }
             }
         }
+    }
+
+    /// A query's squared radius, capped at the cell size squared, and how far its search
+    /// reaches: a hair wider than the radius, so that no cell holding a point within it is
+    /// missed.
+    #[inline]
+    fn search_radius(&self, radius2: f64) -> (f64, f64) {
+        let radius2 = radius2.min(self.cell * self.cell);
+        (radius2, radius2.sqrt() * (1.0 + 1e-12))
     }
 
     /// The block of cells (an inclusive range per axis, clipped to the grid) that a sphere of
