@@ -29,8 +29,8 @@ pub(crate) fn atan2_approx(y: f64, x: f64) -> f64 {
     }
 }
 
-/// Is `x` (an angle divided by a bin width `width`) farther than the approximation's error
-/// from every integer, i.e. from every bin edge? False for NaN.
+/// Is `x` (an angle divided by a bin width `width`) farther than twice the approximation's
+/// error from every integer, i.e. from every bin edge? False for NaN.
 #[inline]
 pub(crate) fn clear_of_edges(x: f64, width: f64) -> bool {
     (x - x.round()).abs() * width > 2.0 * ATAN2_APPROX_ERROR
