@@ -245,7 +245,8 @@ class Registration:
     def verdict(self) -> dict[str, Any]:
         """``confident``, ``reasons`` and per pair ``overlap``, ``residual``,
         ``self_residual``, ``constraint`` (how firmly the overlap holds the pose against a
-        slide), ``support``, ``rival_support`` and ``free_space`` (None when not measured)."""
+        slide), ``support``, ``rival_support``, ``free_space``, ``free_share``, ``landed``
+        and ``tight_support`` (None when not measured)."""
     @property
     def reference_cloud(self) -> int | None:
         """The cloud (from 0) whose frame ``poses`` are in: 0, or the first placed cloud when
@@ -475,7 +476,8 @@ def evaluate_pairs(
     in the benchmark's order (the lines of ``mtpcr eval --records``: ``benchmark``, ``pair``
     (``scene/target-source``), ``seed``, ``moved``, ``re_deg``, ``te``, ``registered``,
     ``confident``, ``reasons``, ``overlap``, ``residual``, ``constraint``, ``support``,
-    ``rival_support``, ``free_space``, ``seconds``, ``t_target_source``) and their summary
+    ``rival_support``, ``free_space``, ``free_share``, ``landed``, ``tight_support``,
+    ``seconds``, ``t_target_source``) and their summary
     (``pairs``, ``registered``, ``recall`` in percent, ``re_deg`` and ``te`` over the
     registered pairs or None, ``median_seconds``, ``failed``, ``failed_confident``,
     ``registered_doubted``).

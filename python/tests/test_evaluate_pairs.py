@@ -33,6 +33,9 @@ RECORD_FIELDS = {
     "support",
     "rival_support",
     "free_space",
+    "free_share",
+    "landed",
+    "tight_support",
     "seconds",
     "t_target_source",
 }

@@ -32,8 +32,8 @@ use crate::result::{EdgeEstimate, Registration, Unplaced};
 use crate::screening::{fingerprint, ScreenedPair, Screening};
 use crate::se3::{invert_rigid, poses_agree, Rigid, Transform};
 use crate::verdict::{
-    doubts, judge, EdgeCheck, HYPOTHESIS_FREE_SPACE, MAX_RESIDUAL, MIN_OVERLAP, MIN_SCENE_LOG_ODDS,
-    MIN_SUPPORT, RIVAL_RATIO,
+    doubts, judge, EdgeCheck, HYPOTHESIS_FREE_SPACE, MAX_RESIDUAL, MIN_OVERLAP, MIN_SUPPORT,
+    RIVAL_RATIO, SCREENED_SCENE_ODDS,
 };
 use rayon::prelude::*;
 
@@ -1362,8 +1362,9 @@ fn unplaced_reason(
         )
     } else if weighed {
         format!(
-            "no pose of scan {} against another scan is trusted by the pair verdict (its matches, their rival, free space, hold against a slide, overlap and residual weighed together, log-odds at least {MIN_SCENE_LOG_ODDS} needed; most matches found {most}; best overlap {best:.2})",
-            v + 1
+            "no pose of scan {} against another scan is trusted by the pair verdict (its matches, their rival, free space, hold against a slide, overlap and residual weighed together, log-odds at least {} needed; most matches found {most}; best overlap {best:.2})",
+            v + 1,
+            SCREENED_SCENE_ODDS.trusted_at
         )
     } else {
         format!(

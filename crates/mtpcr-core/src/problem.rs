@@ -13,9 +13,7 @@ use crate::loss::{CappedDistanceLoss, InlierLoss, Loss};
 use crate::refine::RefineCloud;
 use crate::se3::{translation, Rigid, Transform};
 use crate::search::{IndexedCloud, NearestGrid, SearchMethod};
-use crate::verdict::{
-    check_edge, EdgeCheck, HYPOTHESIS_FREE_SPACE, MIN_SCENE_LOG_ODDS, SCENE_ODDS, SEARCH_FREE_SPACE,
-};
+use crate::verdict::{check_edge, EdgeCheck, SceneOdds, HYPOTHESIS_FREE_SPACE, SEARCH_FREE_SPACE};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use std::time::Instant;
@@ -62,6 +60,10 @@ pub struct PreparedProblem {
 /// alone register about as many pairs (every visible 3DLoMatch pair: 52.2 % against 52.0),
 /// but not the same ones (113 gained, 111 lost): RESULTS.md, 2026-12-05, fourth session.
 pub(crate) const FINER_KEYPOINTS: f64 = 0.75;
+
+/// A descriptor match has landed on the other scan ([`EdgeCheck::landed`]) when its source
+/// keypoint lies within this many eps of that scan's surface.
+const LANDED_EPS: f64 = 2.0;
 
 /// Keypoints of two scans meet (for [`PreparedProblem::slide_constraint`]) within this many
 /// keypoint voxels...
@@ -524,6 +526,29 @@ impl PreparedProblem {
         free_share(&self.free_space[s], &self.free_space[d], t)
     }
 
+    /// `check` of a scene pair registered alone at `t` (centred frames) with the cues its
+    /// descriptor `matches` and free space add ([`EdgeCheck::free_share`],
+    /// [`EdgeCheck::landed`], [`EdgeCheck::tight_support`]); `check` as it is without
+    /// viewpoints.
+    pub(crate) fn with_scene_cues(
+        &self,
+        check: EdgeCheck,
+        matches: &PairMatches,
+        t: &Rigid,
+    ) -> EdgeCheck {
+        let Some(free_share) = self.free_space_share(check.source, check.target, t) else {
+            return check;
+        };
+        let target = self.full[check.target].grid();
+        let (near, m) = ((LANDED_EPS * self.eps).powi(2), t.to_matrix());
+        EdgeCheck {
+            free_share: Some(free_share),
+            landed: Some(matches.landed(&m, |q| target.nearest_within(q, near).hit.is_some())),
+            tight_support: Some(matches.tight_support(&m)),
+            ..check
+        }
+    }
+
     /// How far `t` (cloud `s` -> cloud `d`, centred frames) keeps out of free space: 1 with
     /// none violated or without viewpoints, falling linearly to 0 at
     /// [`HYPOTHESIS_FREE_SPACE`] and beyond (on 300 3DLoMatch pairs, choosing by support times
@@ -559,7 +584,7 @@ impl PreparedProblem {
     /// [`PreparedProblem::check_edge`] of a pose that `support` descriptor matches and a
     /// rival `rival` explain, or `None` when its free space, slide constraint and matches
     /// doubt it whatever its overlap and residual ([`crate::verdict::SceneOdds::at_best`] below
-    /// [`MIN_SCENE_LOG_ODDS`]): then its surfaces, most of a check's time, are not measured.
+    /// [`SceneOdds::trusted_at`]): then its surfaces, most of a check's time, are not measured.
     /// With `None` the verdict doubts the pose, as it would have with the full check.
     pub(crate) fn check_scene_edge(
         &self,
@@ -579,9 +604,13 @@ impl PreparedProblem {
             support: Some(support),
             rival_support: Some(rival),
             free_space,
+            free_share: None,
+            landed: None,
+            tight_support: None,
         };
         // Only a pair with free space measured is judged by the weighed cues.
-        if free_space.is_some() && SCENE_ODDS.at_best(&cues) < MIN_SCENE_LOG_ODDS {
+        let weights = SceneOdds::for_check(&cues);
+        if free_space.is_some() && weights.at_best(&cues) < weights.trusted_at {
             return None;
         }
         let surfaces = check_edge(&self.full, edge, t, self.eps);

@@ -16,7 +16,7 @@ use crate::refine::refine_poses;
 use crate::result::{EdgeEstimate, Registration};
 use crate::screening::Screening;
 use crate::se3::{decode, encode, invert_rigid, poses_agree, Individual, Rigid, Transform};
-use crate::verdict::{doubts, judge, EdgeCheck, SCENE_ODDS};
+use crate::verdict::{doubts, judge, EdgeCheck, SceneOdds};
 use rayon::prelude::*;
 use std::ops::ControlFlow;
 use std::time::Instant;
@@ -129,7 +129,8 @@ impl PreparedProblem {
                 let mut measures = self.pair_check(e, &centred[0], m, &hypotheses[0]);
                 if self.has_viewpoints() && doubts(std::slice::from_ref(&measures))[0].is_some() {
                     if let Some(look) = self.second_look(e, config, &pool)? {
-                        if SCENE_ODDS.log_odds(&look.measures) > SCENE_ODDS.log_odds(&measures) {
+                        let odds = |e: &EdgeCheck| SceneOdds::for_check(e).log_odds(e);
+                        if odds(&look.measures) > odds(&measures) {
                             centred[0] = look.pose;
                             refined_poses = look.poses;
                             measures = look.measures;
@@ -254,7 +255,8 @@ impl PreparedProblem {
         hypotheses: &[Rigid],
     ) -> EdgeCheck {
         let clearance = |r: &Rigid| self.free_space_clearance(e.source, e.target, r);
-        with_support(self.check_edge(e, t), matches, t, hypotheses, clearance)
+        let check = with_support(self.check_edge(e, t), matches, t, hypotheses, clearance);
+        self.with_scene_cues(check, matches, t)
     }
 
     /// The second look at a pair (`e`, the problem's only edge) that the verdict doubts: its
@@ -328,9 +330,12 @@ impl PreparedProblem {
     ) -> Result<Option<(Rigid, usize)>> {
         let (s, t) = (e.source, e.target);
         let pair_icp = |start: Rigid| Ok((self.refine_pair(e, start, config, pool), None));
-        let trusted = |look: Option<Look>| {
-            look.filter(|l| doubts(std::slice::from_ref(&l.measures))[0].is_none())
-        };
+        // Judged by the six cues a room's screened pairs are judged by
+        // (`verdict::SCREENED_SCENE_ODDS`): with the three a pair alone adds, the hotel's
+        // bridge 10-47 (seed 0) passes both looks 118 degrees off and glues fragment 47
+        // (RESULTS.md, 2026-12-06, seventh session).
+        let trusted =
+            |look: Option<Look>| look.filter(|l| doubts(&[l.measures.as_screened()])[0].is_none());
         let Some(found) = self.pair_hypotheses(s, t, config.hypotheses, HypothesisSearch::Pair)?
         else {
             return Ok(None);

@@ -73,22 +73,24 @@ pub const MAX_FREE_SPACE: f64 = 0.05;
 
 /// With viewpoints (scenes), a pair's cues are weighed together rather than each against its
 /// own limit: the log-odds that the pose is right (rotation under 15 degrees, translation
-/// under 30 cm), a logistic fit over 4838 records of every visible 3DMatch and 3DLoMatch pair
-/// (seed 0, as read and with random motions):
+/// under 30 cm), a logistic fit over the records of every visible 3DMatch and 3DLoMatch pair
+/// (2419, seed 0, as read; RESULTS.md, 2026-12-06, seventh session):
 ///
 /// ```text
-/// 7.07 + 1.21 ln(1 + support) - 0.98 ln(1 + rival) - 43.6 min(free space, 0.3)
-///      + 1.90 ln(constraint + 0.001) + 3.75 overlap - 17.7 residual
+/// 0.27 + 0.945 ln(1 + support) - 1.144 ln(1 + rival) - 19.2 min(free space, 0.3)
+///      + 1.766 ln(constraint + 0.001) + 6.01 overlap - 19.2 residual
+///      - 98.8 min(free share, 0.3) + 0.839 ln(1 + landed) + 0.712 ln(1 + tight support)
 /// ```
 ///
 /// One cue no longer decides alone: with the other cues as a typical confident pair's
-/// ([`TYPICAL_SCENE_PAIR`]), a pose that puts 10 % in free space is trusted when 150 matches
-/// agree with it and doubted when 8 do. The pair is trusted at [`MIN_SCENE_LOG_ODDS`] and
-/// above. Measured (RESULTS.md, 2026-12-04, fourth session): the separate limits called 31
-/// of 677 failed pairs confident (4.6 %) and doubted 277 of 1742 registered (15.9 %), with
-/// random motions 50 of 703 (7.1 %) and 246 of 1716 (14.3 %); the weighed cues 21 / 677 (3.1 %) and 216 / 1742
-/// (12.4 %), 21 / 703 (3.0 %) and 192 / 1716 (11.2 %); fitted on four scenes and judged on
-/// the fifth, in turn: 4.3 % and 13.1 %, 4.3 % and 11.6 %.
+/// ([`TYPICAL_SCENE_PAIR`]), a pose that puts a few percent in free space is trusted when
+/// many matches agree with it and doubted when few do. The pair is trusted at
+/// [`SceneOdds::trusted_at`] and above. The last three cues (the share of all of a scan's
+/// points in the other's free space, the matches the pose lands on the other scan, those it
+/// maps closely) took the doubted registered pairs of those records from 12.0 % to 10.0 % at
+/// 4.5 % of the failed pairs confident; a check without them (a room's screened pairs, whose
+/// matches are not kept, and a room's bridges, where the three let a wrong one through) is
+/// weighed by [`SCREENED_SCENE_ODDS`], the six-cue fit before them.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SceneOdds {
     /// The log-odds of a pose with no match, rival, free space or overlap (the intercept).
@@ -106,6 +108,15 @@ pub struct SceneOdds {
     pub overlap: f64,
     /// Per unit of residual ([`EdgeCheck::residual`], relative to eps).
     pub residual: f64,
+    /// Per unit of free share ([`EdgeCheck::free_share`], counted up to
+    /// [`SceneOdds::FREE_SPACE_CAP`]; none counts as 0).
+    pub free_share: f64,
+    /// Per `ln(1 + landed)` ([`EdgeCheck::landed`]; none counts as 0).
+    pub landed: f64,
+    /// Per `ln(1 + tight_support)` ([`EdgeCheck::tight_support`]; none counts as 0).
+    pub tight_support: f64,
+    /// A pose is trusted at this log-odds and above.
+    pub trusted_at: f64,
 }
 
 impl SceneOdds {
@@ -113,13 +124,24 @@ impl SceneOdds {
     /// whatever else; the fit saw few of them).
     pub const FREE_SPACE_CAP: f64 = 0.3;
 
+    /// The weights for `e`: [`SCENE_ODDS`] when its matches' landing is measured (a pair
+    /// registered alone), else [`SCREENED_SCENE_ODDS`].
+    pub fn for_check(e: &EdgeCheck) -> &'static SceneOdds {
+        if e.landed.is_some() {
+            &SCENE_ODDS
+        } else {
+            &SCREENED_SCENE_ODDS
+        }
+    }
+
     /// Each cue's term in [`SceneOdds::log_odds`], in the order support, rival, free space,
-    /// constraint, overlap, residual.
-    pub fn terms(&self, e: &EdgeCheck) -> [f64; 6] {
+    /// constraint, overlap, residual, free share, landed, tight support.
+    pub fn terms(&self, e: &EdgeCheck) -> [f64; 9] {
         let support = e.support.unwrap_or(0) as f64;
         let rival = e.rival_support.unwrap_or(0) as f64;
         let free = e.free_space.unwrap_or(0.0).min(Self::FREE_SPACE_CAP);
         let constraint = e.constraint.unwrap_or(0.0).max(0.0);
+        let free_share = e.free_share.unwrap_or(0.0).min(Self::FREE_SPACE_CAP);
         [
             self.support * support.ln_1p(),
             self.rival * rival.ln_1p(),
@@ -127,6 +149,9 @@ impl SceneOdds {
             self.constraint * (constraint + 0.001).ln(),
             self.overlap * e.overlap,
             self.residual * e.residual,
+            self.free_share * free_share,
+            self.landed * (e.landed.unwrap_or(0) as f64).ln_1p(),
+            self.tight_support * (e.tight_support.unwrap_or(0) as f64).ln_1p(),
         ]
     }
 
@@ -137,7 +162,7 @@ impl SceneOdds {
 
     /// The most [`SceneOdds::log_odds`] `e`'s pose can reach whatever its overlap (in
     /// [0, 1]) and residual (at least 0) turn out to be: a pair below
-    /// [`MIN_SCENE_LOG_ODDS`] by this is doubted before its surfaces are measured.
+    /// [`SceneOdds::trusted_at`] by this is doubted before its surfaces are measured.
     pub fn at_best(&self, e: &EdgeCheck) -> f64 {
         if self.residual > 0.0 {
             return f64::INFINITY;
@@ -151,8 +176,33 @@ impl SceneOdds {
     }
 }
 
-/// The weights of [`SceneOdds`] (see there).
+/// The weights of [`SceneOdds`] for a pair registered alone (see there), trusted at odds of
+/// 5.4 : 1: on the records of the fit it lets 23 of 556 failed pairs through (4.1 %) and
+/// doubts 194 of 1863 registered (10.4 %); run with it (every visible pair, seed 0, where it
+/// also decides which pairs take a second look and which look's answer is kept): 26 of 559
+/// (4.7 %) and 180 of 1860 (9.7 %), against 26 of 556 and 218 of 1863 with the six cues.
 pub const SCENE_ODDS: SceneOdds = SceneOdds {
+    base: 0.266,
+    support: 0.945,
+    rival: -1.144,
+    free_space: -19.22,
+    constraint: 1.766,
+    overlap: 6.01,
+    residual: -19.25,
+    free_share: -98.8,
+    landed: 0.839,
+    tight_support: 0.712,
+    trusted_at: 1.74,
+};
+
+/// The weights of [`SceneOdds`] for a check whose matches' landing is not measured (a room's
+/// screened pairs): the six-cue fit over 4838 records of every visible 3DMatch and 3DLoMatch
+/// pair (seed 0, as read and with random motions; RESULTS.md, 2026-12-04, fourth session),
+/// trusted at odds of 6.4 : 1 (3 % of the failed pairs of the fit through, 4.3 % on a scene
+/// left out of it). There the weighed cues called 21 of 677 failed pairs confident (3.1 %)
+/// and doubted 216 of 1742 registered (12.4 %), where the separate limits had 31 (4.6 %)
+/// and 277 (15.9 %).
+pub const SCREENED_SCENE_ODDS: SceneOdds = SceneOdds {
     base: 7.07,
     support: 1.21,
     rival: -0.98,
@@ -160,11 +210,11 @@ pub const SCENE_ODDS: SceneOdds = SceneOdds {
     constraint: 1.90,
     overlap: 3.75,
     residual: -17.7,
+    free_share: 0.0,
+    landed: 0.0,
+    tight_support: 0.0,
+    trusted_at: 1.86,
 };
-
-/// A scene pair is trusted at this log-odds and above (odds 6.4 : 1): on the records of the
-/// fit it lets 3 % of the failed pairs through (4.3 % on a scene left out of the fit).
-pub const MIN_SCENE_LOG_ODDS: f64 = 1.86;
 
 /// What a confident scene pair typically measures (medians over the records of
 /// [`SceneOdds`]): the reason of a doubt names the cue that falls farthest below it.
@@ -178,6 +228,9 @@ pub const TYPICAL_SCENE_PAIR: EdgeCheck = EdgeCheck {
     support: Some(42),
     rival_support: Some(0),
     free_space: Some(0.007),
+    free_share: Some(0.002),
+    landed: Some(1763),
+    tight_support: Some(9),
 };
 
 /// An edge is trusted only if its overlapping surfaces hold it against a slide this firmly
@@ -223,6 +276,18 @@ pub struct EdgeCheck {
     /// direction; weighed with the other cues by [`SCENE_ODDS`]), 1 when one scanner stands
     /// behind a surface the other saw (see [`crate::freespace`]); `None` without viewpoints.
     pub free_space: Option<f64>,
+    /// The share of all of one scan's points put where the other scanner saw through (the
+    /// larger direction; unlike `free_space` counted over every point, seen by the other
+    /// scanner or not): measured for a scene pair registered alone, `None` otherwise.
+    pub free_share: Option<f64>,
+    /// Descriptor matches whose source keypoint the transform puts on the other scan's
+    /// surface (within two eps), whether it meets its matched keypoint or not: how much of
+    /// what was matched lies in the overlap. Measured for a scene pair registered alone
+    /// ([`SCENE_ODDS`]), `None` otherwise.
+    pub landed: Option<usize>,
+    /// Descriptor matches the transform maps within a quarter of the inlier distance (half
+    /// of `support`'s), their normals agreeing; measured with `landed`.
+    pub tight_support: Option<usize>,
 }
 
 /// The judgement of a registration.
@@ -234,6 +299,20 @@ pub struct Verdict {
     pub reasons: Vec<String>,
     /// The measures of every edge.
     pub edges: Vec<EdgeCheck>,
+}
+
+impl EdgeCheck {
+    /// This check without the cues only a pair registered alone measures (`free_share`,
+    /// `landed`, `tight_support`): judged as a room's screened pair is, by
+    /// [`SCREENED_SCENE_ODDS`].
+    pub fn as_screened(&self) -> EdgeCheck {
+        EdgeCheck {
+            free_share: None,
+            landed: None,
+            tight_support: None,
+            ..self.clone()
+        }
+    }
 }
 
 /// Measures `edge` at its transform `t_target_source` (centred frames).
@@ -280,6 +359,9 @@ pub(crate) fn check_edge(
         support: None,
         rival_support: None,
         free_space: None,
+        free_share: None,
+        landed: None,
+        tight_support: None,
     }
 }
 
@@ -375,14 +457,15 @@ fn cue_doubt(e: &EdgeCheck, name: &str) -> Option<String> {
     }
 }
 
-/// The doubt of a scene pair (free space and matches measured) by [`SCENE_ODDS`], naming the
+/// The doubt of a scene pair (free space and matches measured) by [`SceneOdds::for_check`], naming the
 /// cue that falls farthest below a typical confident pair's; `None` when trusted.
 fn scene_doubt(e: &EdgeCheck, name: &str) -> Option<String> {
-    let odds = SCENE_ODDS.log_odds(e);
-    if odds >= MIN_SCENE_LOG_ODDS {
+    let weights = SceneOdds::for_check(e);
+    let odds = weights.log_odds(e);
+    if odds >= weights.trusted_at {
         return None;
     }
-    let (terms, typical) = (SCENE_ODDS.terms(e), SCENE_ODDS.terms(&TYPICAL_SCENE_PAIR));
+    let (terms, typical) = (weights.terms(e), weights.terms(&TYPICAL_SCENE_PAIR));
     let weakest = (0..terms.len())
         .min_by(|&a, &b| (terms[a] - typical[a]).total_cmp(&(terms[b] - typical[b])))
         .unwrap_or(0);
@@ -402,12 +485,24 @@ fn scene_doubt(e: &EdgeCheck, name: &str) -> Option<String> {
             None => "too few keypoints meet to hold the pose against a slide".to_string(),
         },
         4 => format!("the scans overlap by {:.2} only", e.overlap),
-        _ => format!("the surfaces lie on each other loosely (residual {:.2} of eps)", e.residual),
+        5 => format!("the surfaces lie on each other loosely (residual {:.2} of eps)", e.residual),
+        6 => format!(
+            "{:.0} % of all of one scan's points lie where the other scanner saw through",
+            100.0 * e.free_share.unwrap_or(0.0)
+        ),
+        7 => format!(
+            "only {} feature matches land on the other scan",
+            e.landed.unwrap_or(0)
+        ),
+        _ => format!(
+            "only {} feature matches agree closely with the pose",
+            e.tight_support.unwrap_or(0)
+        ),
     };
     Some(format!(
         "clouds {name}: {cue}; with the other cues the pose is right at odds of {:.2} : 1 only (at least {:.1} : 1 expected)",
         odds.exp(),
-        MIN_SCENE_LOG_ODDS.exp()
+        weights.trusted_at.exp()
     ))
 }
 
@@ -436,6 +531,9 @@ mod tests {
             support: None,
             rival_support: None,
             free_space: None,
+            free_share: None,
+            landed: None,
+            tight_support: None,
         }
     }
 
@@ -483,7 +581,7 @@ mod tests {
         );
         // The odds rise with every cue that improves.
         let base = scene(12, 2, 0.02, 0.05);
-        let odds = |e: &EdgeCheck| SCENE_ODDS.log_odds(e);
+        let odds = |e: &EdgeCheck| SCREENED_SCENE_ODDS.log_odds(e);
         for better in [
             scene(13, 2, 0.02, 0.05),
             scene(12, 1, 0.02, 0.05),
@@ -604,10 +702,10 @@ mod tests {
             (150, 0, 0.0, 0.3),
         ] {
             let cues = scene(support, rival, free, constraint);
-            let best = SCENE_ODDS.at_best(&cues);
+            let best = SCREENED_SCENE_ODDS.at_best(&cues);
             for overlap in [0.0, 0.1, 0.48, 1.0] {
                 for residual in [0.0, 0.05, 0.126, 0.25, 3.0] {
-                    let odds = SCENE_ODDS.log_odds(&EdgeCheck {
+                    let odds = SCREENED_SCENE_ODDS.log_odds(&EdgeCheck {
                         overlap,
                         residual,
                         ..cues.clone()
@@ -620,7 +718,58 @@ mod tests {
         assert!(reached);
         // A pose that few matches explain and that puts a fifth in free space is doubted
         // whatever its surfaces; the typical confident pair is not.
-        assert!(SCENE_ODDS.at_best(&scene(3, 2, 0.2, 0.01)) < MIN_SCENE_LOG_ODDS);
-        assert!(SCENE_ODDS.at_best(&scene(42, 0, 0.007, 0.11)) >= MIN_SCENE_LOG_ODDS);
+        assert!(
+            SCREENED_SCENE_ODDS.at_best(&scene(3, 2, 0.2, 0.01)) < SCREENED_SCENE_ODDS.trusted_at
+        );
+        assert!(
+            SCREENED_SCENE_ODDS.at_best(&scene(42, 0, 0.007, 0.11))
+                >= SCREENED_SCENE_ODDS.trusted_at
+        );
+    }
+
+    #[test]
+    fn a_pair_registered_alone_is_weighed_with_its_matches_landing_and_its_free_share() {
+        // A check with the matches' landing measured is weighed by the nine cues, one without
+        // by the six.
+        let alone = |free_share: f64, landed: usize, tight: usize| EdgeCheck {
+            free_share: Some(free_share),
+            landed: Some(landed),
+            tight_support: Some(tight),
+            ..scene(42, 0, 0.007, 0.11)
+        };
+        assert_eq!(SceneOdds::for_check(&alone(0.0, 1763, 9)), &SCENE_ODDS);
+        assert_eq!(
+            SceneOdds::for_check(&alone(0.0, 1763, 9).as_screened()),
+            &SCREENED_SCENE_ODDS
+        );
+        assert_eq!(
+            SceneOdds::for_check(&scene(42, 0, 0.007, 0.11)),
+            &SCREENED_SCENE_ODDS
+        );
+        let d = |e: EdgeCheck| doubts(&[e]).remove(0);
+        // The typical confident pair is trusted; the same pose with a tenth of all its points
+        // in the other's free space is not, and the reason names that cue.
+        assert_eq!(d(alone(0.002, 1763, 9)), None);
+        let why = d(alone(0.1, 1763, 9)).unwrap();
+        assert!(why.contains("10 % of all of one scan's points"), "{why}");
+        let why = d(EdgeCheck {
+            support: Some(12),
+            ..alone(0.002, 5, 1)
+        })
+        .unwrap();
+        assert!(
+            why.contains("feature matches land on the other scan"),
+            "{why}"
+        );
+        // The odds rise with every new cue that improves.
+        let base = alone(0.02, 300, 3);
+        let odds = |e: &EdgeCheck| SceneOdds::for_check(e).log_odds(e);
+        for better in [
+            alone(0.01, 300, 3),
+            alone(0.02, 400, 3),
+            alone(0.02, 300, 4),
+        ] {
+            assert!(odds(&better) > odds(&base), "{better:?}");
+        }
     }
 }

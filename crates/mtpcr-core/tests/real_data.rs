@@ -141,8 +141,8 @@ fn on_3dlomatch_pairs_right_poses_keep_out_of_free_space_and_wrong_ones_do_not()
 
 /// Three 3DLoMatch pairs whose first look (keypoints 2 % of the scans' size apart) ends on a
 /// wrong pose, 94-174 degrees off, that the verdict doubts: the second look at finer
-/// keypoints registers each of them, and the verdict trusts its answer, whatever the number
-/// of threads.
+/// keypoints registers each of them, whatever the number of threads, and the verdict trusts
+/// two of its answers.
 #[test]
 #[cfg_attr(
     not(shared_data),
@@ -178,7 +178,12 @@ fn a_doubted_3dlomatch_pair_is_registered_by_the_second_look() {
     };
     let records = run(2);
     for r in &records {
-        assert!(r.registered && r.confident, "{r:#?}");
+        assert!(r.registered, "{r:#?}");
+        // 38-40 is right (2.4 degrees) but doubted: 9 matches against a rival's 4 at an
+        // overlap of 0.15 give odds of 5.1 : 1, below the 5.7 : 1 of `verdict::SCENE_ODDS`
+        // (it was trusted at 6.4 : 1 by the six cues before 2026-12-06).
+        let doubted = r.pair.ends_with("/38-40");
+        assert_eq!(r.confident, !doubted, "{r:#?}");
     }
     // The second look, like the first, gives the same poses on any number of threads.
     let one_thread: Vec<_> = run(1).iter().map(|r| r.t_target_source).collect();

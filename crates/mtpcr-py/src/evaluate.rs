@@ -128,7 +128,8 @@ pub(crate) fn evaluate<'py>(
 /// in the benchmark's order (the fields of the CLI's ``--records`` lines: ``benchmark``,
 /// ``pair`` (``scene/target-source``), ``seed``, ``moved``, ``re_deg``, ``te``,
 /// ``registered``, ``confident``, ``reasons``, ``overlap``, ``residual``, ``constraint``,
-/// ``support``, ``rival_support``, ``free_space``, ``seconds``, ``t_target_source`` (4x4 rows)), and
+/// ``support``, ``rival_support``, ``free_space``, ``free_share``, ``landed``,
+/// ``tight_support``, ``seconds``, ``t_target_source`` (4x4 rows)), and
 /// their summary:
 /// ``pairs``, ``registered``, ``recall`` (percent), ``re_deg`` and ``te`` (means over the
 /// registered pairs, ``None`` when there are none), ``median_seconds``, ``failed``,

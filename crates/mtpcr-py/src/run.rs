@@ -286,8 +286,9 @@ impl PyRegistration {
     /// points within eps of the other cloud, ``residual``: their median distance to its
     /// surface, relative to eps, ``self_residual``: the same for the two scans against
     /// themselves, the larger; what a perfect fit would leave; ``constraint``: how firmly the
-    /// overlapping surfaces hold the pose against a slide, ``support``, ``rival_support``
-    /// and ``free_space``, each None when not measured).
+    /// overlapping surfaces hold the pose against a slide, ``support``, ``rival_support``,
+    /// ``free_space``, ``free_share``, ``landed`` and ``tight_support``, each None when not
+    /// measured).
     #[getter]
     fn verdict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
         let text = serde_json::to_string(&self.inner.verdict)

@@ -276,6 +276,18 @@ pub struct PairRecord {
     /// [`crate::verdict::EdgeCheck::free_space`]; absent in records of older versions).
     #[serde(default)]
     pub free_space: Option<f64>,
+    /// The share of all of one fragment's points put where the other's camera saw through
+    /// ([`crate::verdict::EdgeCheck::free_share`]; absent in records of older versions).
+    #[serde(default)]
+    pub free_share: Option<f64>,
+    /// Feature matches the estimate puts on the other fragment's surface
+    /// ([`crate::verdict::EdgeCheck::landed`]; absent in records of older versions).
+    #[serde(default)]
+    pub landed: Option<usize>,
+    /// Feature matches the estimate maps within a quarter of the inlier distance
+    /// ([`crate::verdict::EdgeCheck::tight_support`]; absent in records of older versions).
+    #[serde(default)]
+    pub tight_support: Option<usize>,
     /// Seconds of the registration (reading the files excluded).
     pub seconds: f64,
     /// The estimate, rows of the 4x4 matrix (the moved source into the target).
@@ -352,6 +364,9 @@ pub fn run_pair(
         support: check.and_then(|c| c.support),
         rival_support: check.and_then(|c| c.rival_support),
         free_space: check.and_then(|c| c.free_space),
+        free_share: check.and_then(|c| c.free_share),
+        landed: check.and_then(|c| c.landed),
+        tight_support: check.and_then(|c| c.tight_support),
         seconds: result.seconds,
         t_target_source: crate::io::matrix_rows(&estimate),
     };
@@ -546,6 +561,9 @@ mod tests {
             support: Some(40),
             rival_support: Some(5),
             free_space: Some(0.01),
+            free_share: Some(0.002),
+            landed: Some(900),
+            tight_support: Some(10),
             seconds: 1.0,
             t_target_source: [[0.0; 4]; 4],
         };
@@ -579,6 +597,9 @@ mod tests {
             support: None,
             rival_support: None,
             free_space: None,
+            free_share: None,
+            landed: None,
+            tight_support: None,
             seconds: 1.0,
             t_target_source: [[0.0; 4]; 4],
         }

@@ -424,6 +424,24 @@ impl PairMatches {
         self.set.support(&Rigid::from_matrix(t_target_source))
     }
 
+    /// Matches that `t_target_source` maps within a quarter of the inlier distance, their
+    /// normals agreeing ([`PairMatches::support`] at half its distance).
+    pub fn tight_support(&self, t_target_source: &Transform) -> usize {
+        self.set.tight_support(&Rigid::from_matrix(t_target_source))
+    }
+
+    /// Matches whose source keypoint `t_target_source` puts where `on_target` holds (a
+    /// test on the target's frame, such as "on its surface"), whether it meets its matched
+    /// keypoint or not.
+    pub fn landed(
+        &self,
+        t_target_source: &Transform,
+        on_target: impl Fn(&[f64; 3]) -> bool,
+    ) -> usize {
+        self.set
+            .landed(&Rigid::from_matrix(t_target_source), on_target)
+    }
+
     /// Are two poses the same candidate (within [`FeatureConfig::nms_angle_deg`] and
     /// [`FeatureConfig::nms_distance`] of each other)?
     pub fn same_pose(&self, a: &Transform, b: &Transform) -> bool {

@@ -125,6 +125,20 @@ impl PairMatchSet {
         self.matched.count(pose, self.matched.d2 / 4.0)
     }
 
+    /// Matches that `pose` fits within a quarter of the inlier distance.
+    pub(super) fn tight_support(&self, pose: &Rigid) -> usize {
+        self.matched.count(pose, self.matched.d2 / 16.0)
+    }
+
+    /// Matches whose source keypoint `pose` puts where `on_target` holds.
+    pub(super) fn landed(&self, pose: &Rigid, on_target: impl Fn(&[f64; 3]) -> bool) -> usize {
+        self.matched
+            .src
+            .iter()
+            .filter(|p| on_target(&pose.apply(p)))
+            .count()
+    }
+
     /// Are `a` and `b` the same candidate ([`FeatureConfig::nms_angle_deg`] and
     /// [`FeatureConfig::nms_distance`])?
     pub(super) fn same(&self, a: &Rigid, b: &Rigid, config: &FeatureConfig) -> bool {

@@ -481,3 +481,33 @@ fn features_consensus_finds_the_pose_among_few_true_matches_without_ransac() {
     let refused = matches.candidates_where(&source, &target, &far);
     assert!(refused.iter().all(|c| far(&c.t_target_source)));
 }
+
+#[test]
+fn features_tight_support_asks_half_the_distance_and_landed_counts_where_keypoints_land() {
+    let truth = Rigid::from_matrix(&decode(&[0.4, -1.1, 0.7, 0.3, -0.2, 0.5]));
+    let (source, target) = mostly_wrong_matches(40, 1000, &truth);
+    let config = FeatureConfig::for_spacing(0.05);
+    let matches = PairMatches::new(&source, &target, &config).unwrap();
+    let t = truth.to_matrix();
+    assert_eq!(matches.support(&t), 40);
+    assert_eq!(matches.tight_support(&t), 40);
+    // Shifted by 0.35 of the inlier distance: within support's half of it, beyond a quarter.
+    let shifted = translation([0.35 * config.inlier_distance, 0.0, 0.0]) * t;
+    assert_eq!(matches.support(&shifted), 40);
+    assert_eq!(matches.tight_support(&shifted), 0);
+    // Landed: the matches whose source keypoint the pose puts where the test holds, met or
+    // not: all of them inside the target's cube at the truth, none when moved far away, and
+    // a half-space and its complement share them.
+    let all = matches.landed(&t, |_| true);
+    assert!(all >= 1000, "{all}");
+    let in_cube = |q: &[f64; 3]| q.iter().all(|c| c.abs() < 10.0);
+    assert_eq!(matches.landed(&t, in_cube), all);
+    let far = translation([100.0, 0.0, 0.0]) * t;
+    assert_eq!(matches.landed(&far, in_cube), 0);
+    let (east, west) = (
+        matches.landed(&t, |q| q[0] > 0.0),
+        matches.landed(&t, |q| q[0] <= 0.0),
+    );
+    assert!(east > all / 10 && west > all / 10, "{east} {west}");
+    assert_eq!(east + west, all);
+}
