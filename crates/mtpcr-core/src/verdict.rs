@@ -177,10 +177,12 @@ impl SceneOdds {
 }
 
 /// The weights of [`SceneOdds`] for a pair registered alone (see there), trusted at odds of
-/// 5.4 : 1: on the records of the fit it lets 23 of 556 failed pairs through (4.1 %) and
-/// doubts 194 of 1863 registered (10.4 %); run with it (every visible pair, seed 0, where it
-/// also decides which pairs take a second look and which look's answer is kept): 26 of 559
-/// (4.7 %) and 180 of 1860 (9.7 %), against 26 of 556 and 218 of 1863 with the six cues.
+/// 5.7 : 1: on the records of the fit it lets 22 of 556 failed pairs through (4.0 %) and
+/// doubts 203 of 1863 registered (10.9 %); run with it (every visible pair, seed 0, where it
+/// also decides which pairs take a second look and which look's answer is kept): 25 of 559
+/// (4.5 %) and 188 of 1860 (10.1 %), against 26 of 556 and 218 of 1863 with the six cues; with
+/// random motions 32 of 586 (5.5 %) and 174 of 1833 (9.5 %), against 5.7 % and 11.0 %. At 5.4 :
+/// 1 the pairs as read gave 4.7 % and 9.7 %, but the moved ones 6.3 % confident failures.
 pub const SCENE_ODDS: SceneOdds = SceneOdds {
     base: 0.266,
     support: 0.945,
