@@ -315,6 +315,12 @@ impl EdgeCheck {
             ..self.clone()
         }
     }
+
+    /// The log-odds that this pose is right, by the weights its cues call for
+    /// ([`SceneOdds::for_check`]): how two answers for the same scene pair are compared.
+    pub fn scene_log_odds(&self) -> f64 {
+        SceneOdds::for_check(self).log_odds(self)
+    }
 }
 
 /// Measures `edge` at its transform `t_target_source` (centred frames).
