@@ -849,7 +849,7 @@ mod tests {
     fn a_bridge_takes_the_answer_the_verdict_trusts_more() {
         #[cfg(shared_data)]
         {
-            use crate::eval::random_motions;
+            use crate::eval::run_motions;
             use crate::se3::rotation_error_deg;
             let dir = std::path::PathBuf::from(env!("MTPCR_SHARED_DIR_FOUND"))
                 .join("data/3dmatch/sun3d-home_at-home_at_scan1_2013_jan_1");
@@ -861,12 +861,7 @@ mod tests {
                     (cloud.with_viewpoint([0.0; 3]), pose)
                 })
                 .unzip();
-            // As `eval::run_moved_views` moves them.
-            let extent = clouds
-                .iter()
-                .map(PointCloud::largest_side)
-                .fold(0.0, f64::max);
-            let motions = random_motions(0x6d6f_7665, extent, clouds.len());
+            let motions = run_motions(&clouds, 0);
             let moved: Vec<PointCloud> = clouds
                 .iter()
                 .zip(&motions)

@@ -66,6 +66,16 @@ pub fn random_motions(seed: u64, max_translation: f64, count: usize) -> Vec<Tran
         .collect()
 }
 
+/// The motions a run of `seed` moves `clouds` by ([`run_moved`], [`run_moved_views`]): one
+/// a cloud, translations up to the largest cloud extent.
+pub fn run_motions(clouds: &[PointCloud], seed: u64) -> Vec<Transform> {
+    let extent = clouds
+        .iter()
+        .map(PointCloud::largest_side)
+        .fold(0.0, f64::max);
+    random_motions(seed ^ 0x6d6f_7665, extent, clouds.len())
+}
+
 /// Moves cloud v by `motions[v]` and corrects the ground truth of each edge of `graph`:
 /// `T_ts' = M_t T_ts M_s^-1`.
 pub fn apply_motions(
@@ -98,11 +108,7 @@ pub fn run_moved(
     seed: u64,
 ) -> Result<(Registration, Scores)> {
     let graph = ViewGraph::for_views(clouds.len())?;
-    let extent = clouds
-        .iter()
-        .map(PointCloud::largest_side)
-        .fold(0.0, f64::max);
-    let motions = random_motions(seed ^ 0x6d6f_7665, extent, clouds.len());
+    let motions = run_motions(clouds, seed);
     let (moved, gt) = apply_motions(clouds, &graph, truth, &motions);
     let config = Config {
         seed: Some(seed),
@@ -268,11 +274,7 @@ pub fn run_moved_views(
     config: &Config,
     seed: u64,
 ) -> Result<ViewsRun> {
-    let extent = clouds
-        .iter()
-        .map(PointCloud::largest_side)
-        .fold(0.0, f64::max);
-    let motions = random_motions(seed ^ 0x6d6f_7665, extent, clouds.len());
+    let motions = run_motions(clouds, seed);
     let moved: Vec<PointCloud> = clouds
         .iter()
         .zip(&motions)
