@@ -849,7 +849,7 @@ mod tests {
     fn a_bridge_takes_the_answer_the_verdict_trusts_more() {
         #[cfg(shared_data)]
         {
-            use crate::eval::run_motions;
+            use crate::eval::{move_clouds, run_motions};
             use crate::se3::rotation_error_deg;
             let dir = std::path::PathBuf::from(env!("MTPCR_SHARED_DIR_FOUND"))
                 .join("data/3dmatch/sun3d-home_at-home_at_scan1_2013_jan_1");
@@ -861,12 +861,9 @@ mod tests {
                     (cloud.with_viewpoint([0.0; 3]), pose)
                 })
                 .unzip();
+            // As `mtpcr eval` moves them at seed 0.
             let motions = run_motions(&clouds, 0);
-            let moved: Vec<PointCloud> = clouds
-                .iter()
-                .zip(&motions)
-                .map(|(c, m)| c.transformed(m))
-                .collect();
+            let moved = move_clouds(&clouds, &motions);
             let config = Config {
                 seed: Some(0),
                 ..Config::default()

@@ -76,6 +76,15 @@ pub fn run_motions(clouds: &[PointCloud], seed: u64) -> Vec<Transform> {
     random_motions(seed ^ 0x6d6f_7665, extent, clouds.len())
 }
 
+/// Cloud v moved by `motions[v]`.
+pub fn move_clouds(clouds: &[PointCloud], motions: &[Transform]) -> Vec<PointCloud> {
+    clouds
+        .iter()
+        .zip(motions)
+        .map(|(c, m)| c.transformed(m))
+        .collect()
+}
+
 /// Moves cloud v by `motions[v]` and corrects the ground truth of each edge of `graph`:
 /// `T_ts' = M_t T_ts M_s^-1`.
 pub fn apply_motions(
@@ -84,11 +93,7 @@ pub fn apply_motions(
     truth: &[Transform],
     motions: &[Transform],
 ) -> (Vec<PointCloud>, Vec<Transform>) {
-    let moved = clouds
-        .iter()
-        .zip(motions)
-        .map(|(c, m)| c.transformed(m))
-        .collect();
+    let moved = move_clouds(clouds, motions);
     let gt = graph
         .edges()
         .iter()
@@ -275,11 +280,7 @@ pub fn run_moved_views(
     seed: u64,
 ) -> Result<ViewsRun> {
     let motions = run_motions(clouds, seed);
-    let moved: Vec<PointCloud> = clouds
-        .iter()
-        .zip(&motions)
-        .map(|(c, m)| c.transformed(m))
-        .collect();
+    let moved = move_clouds(clouds, &motions);
     let config = Config {
         seed: Some(seed),
         ..config.clone()
