@@ -1943,19 +1943,24 @@ mod tests {
         assert!(!on_a_loop(edge(3, 2), &links, 4));
     }
 
-    /// A room's placed scans are refined pair by pair and fitted to those pairs: from pair
-    /// hypotheses each 2-3 degrees and a few centimetres off, the refined poses land on the
-    /// truth (the room's three walls hold every pair against a slide).
-    #[test]
-    fn a_room_is_refined_pair_by_pair_to_the_true_poses() {
-        use crate::freespace::tests::{corner, pose};
-        let mut room = corner();
+    /// [`corner`](crate::freespace::tests::corner) with a third wall (x = -1): nothing slides.
+    fn three_walls() -> Vec<[f64; 3]> {
+        let mut room = crate::freespace::tests::corner();
         for j in -40..=40 {
             for k in 0..=80 {
                 room.push([-1.0, j as f64 * 0.025, 1.0 + k as f64 * 0.025]);
             }
         }
-        let (prepared, mut pairs) = room_of(room);
+        room
+    }
+
+    /// A room's placed scans are refined pair by pair and fitted to those pairs: from pair
+    /// hypotheses each 2-3 degrees and a few centimetres off, the refined poses land on the
+    /// truth (the room's three walls hold every pair against a slide).
+    #[test]
+    fn a_room_is_refined_pair_by_pair_to_the_true_poses() {
+        use crate::freespace::tests::pose;
+        let (prepared, mut pairs) = room_of(three_walls());
         // The true pair poses (centred), before they are put off.
         let truth: Vec<Transform> = pairs.iter().map(|p| p.poses[0].0).collect();
         for (k, pair) in pairs.iter_mut().enumerate() {
@@ -2004,14 +2009,8 @@ mod tests {
     /// there; the pair's ICP pulls it back and the closures 0-3 and 1-3 join the fit.
     #[test]
     fn closures_are_found_again_at_the_fitted_poses() {
-        use crate::freespace::tests::{corner, pose};
-        let mut room = corner();
-        for j in -40..=40 {
-            for k in 0..=80 {
-                room.push([-1.0, j as f64 * 0.025, 1.0 + k as f64 * 0.025]);
-            }
-        }
-        let (prepared, mut pairs) = room_of(room);
+        use crate::freespace::tests::pose;
+        let (prepared, mut pairs) = room_of(three_walls());
         // Pair 2 -> 3 put off across all three walls; pair 0 -> 3 not refined.
         pairs[1].poses[0].0 *= pose(0.0, [0.1, 0.1, -0.1]).to_matrix();
         let chosen = [Some(0); 4];
