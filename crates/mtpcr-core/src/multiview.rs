@@ -112,9 +112,9 @@ const CLOSURES_PER_SCAN: usize = 4;
 /// fitted once more: a chain pulled together by the first closures puts more pairs where
 /// their ICP can hold them. Over five rooms and three seeds 585 of 658 placed fragments
 /// within 5 degrees and 15 cm of poses fitted to the room's own scans (550 without), 2 wrong
-/// against them (3), 451 near the benchmark's truth (432), at 1.06-1.08x the kitchen's time;
-/// kept from 0.1 overlap the lab lost two fragments, from 0.3 none is kept (RESULTS.md,
-/// 2026-12-06, ninth session).
+/// against them (3), 451 near the benchmark's truth (432), at 1.07x the rooms' time (the
+/// home 1.20x); kept from 0.1 overlap the lab lost two fragments, from 0.3 none is kept
+/// (RESULTS.md, 2026-12-06, ninth session, and "Closures found again at the fitted poses").
 const REFIT_CLOSURE_OVERLAP: f64 = 0.2;
 
 /// Rounds of placement: a pair whose fit fails at the refined poses is rejected and the
