@@ -696,6 +696,10 @@ fn linked(links: &[Edge], n: usize, from: usize) -> Vec<bool> {
 /// one pair look strong; it then glued whole groups of fragments together wrongly (issue 23:
 /// the lab, 38 fragments, six groups each right within itself, 90-180 degrees apart).
 ///
+/// The pairs are taken in passes until a pass joins nothing: a pair refused for want of a
+/// second pair may close a loop once its groups have grown (the study, seed 0: 61 of 66
+/// fragments placed instead of 53; RESULTS.md, 2026-12-07, third session).
+///
 /// Every join (of a single scan too) must be `clear` over every scan of one group against
 /// every scan of the other (where they have viewpoints: none lands where a scanner of the
 /// other group saw through, [`JOIN_FREE_SPACE`]).
@@ -727,44 +731,54 @@ fn place(
     let bridges = order
         .iter()
         .filter(|&&(p, _, _)| bridge.get(p).copied().unwrap_or(false));
-    for (k, &(p, t_ts, _)) in order.iter().chain(bridges).enumerate() {
-        let second_pass = k >= order.len();
-        let Edge {
-            source: s,
-            target: t,
-        } = pairs[p].edge;
-        let (a, b) = (group[s], group[t]);
-        if a == b {
-            continue;
+    // Passes until one joins nothing: a pair refused because a loop through it did not yet
+    // close (its groups still small) may close one once the groups have grown (the study,
+    // seed 0: 18-63 met a group of 2 and 15-62 one of 35 that 18 had not yet joined).
+    loop {
+        let joined = joining.len();
+        for (k, &(p, t_ts, _)) in order.iter().chain(bridges.clone()).enumerate() {
+            let as_bridge = k >= order.len();
+            let Edge {
+                source: s,
+                target: t,
+            } = pairs[p].edge;
+            let (a, b) = (group[s], group[t]);
+            if a == b {
+                continue;
+            }
+            let t_ab = group_pose(pairs, &group, &frame, p, &t_ts, a);
+            // The loop first: it is cheap, the free-space test is not.
+            if !as_bridge
+                && members[a].len() > 1
+                && members[b].len() > 1
+                && !loop_closes(pairs, &order, &group, &frame, (a, b), &t_ab, tolerance)
+            {
+                continue;
+            }
+            // Every scan of one group against every scan of the other, at the joined poses.
+            let frame_ref = &frame;
+            let across: Vec<Across> = members[b]
+                .iter()
+                .flat_map(|&v| {
+                    members[a]
+                        .iter()
+                        .map(move |&u| (v, u, invert_rigid(&frame_ref[u]) * t_ab * frame_ref[v]))
+                })
+                .collect();
+            if !clear(&across) {
+                continue;
+            }
+            let moved = std::mem::take(&mut members[b]);
+            for &m in &moved {
+                frame[m] = t_ab * frame[m];
+                group[m] = a;
+            }
+            members[a].extend(moved);
+            joining.push(p);
         }
-        let t_ab = group_pose(pairs, &group, &frame, p, &t_ts, a);
-        // Every scan of one group against every scan of the other, at the joined poses.
-        let frame_ref = &frame;
-        let across: Vec<Across> = members[b]
-            .iter()
-            .flat_map(|&v| {
-                members[a]
-                    .iter()
-                    .map(move |&u| (v, u, invert_rigid(&frame_ref[u]) * t_ab * frame_ref[v]))
-            })
-            .collect();
-        if !clear(&across) {
-            continue;
+        if joining.len() == joined {
+            break;
         }
-        if !second_pass
-            && members[a].len() > 1
-            && members[b].len() > 1
-            && !loop_closes(pairs, &order, &group, &frame, (a, b), &t_ab, tolerance)
-        {
-            continue;
-        }
-        let moved = std::mem::take(&mut members[b]);
-        for &m in &moved {
-            frame[m] = t_ab * frame[m];
-            group[m] = a;
-        }
-        members[a].extend(moved);
-        joining.push(p);
     }
     // The largest group is placed (of equal ones, the one holding the lowest scan), in the
     // frame of its first scan: a room whose first fragment joins few others is still
@@ -1901,6 +1915,53 @@ mod tests {
             a.len() == 1
         });
         assert_eq!(refused.iter().filter(|p| p.is_some()).count(), 2);
+    }
+
+    /// A pair refused because no second pair closed a loop through it is tried again once
+    /// the groups have grown: groups {0, 1}, {2, 3}, {4, 5}; 2-5 and 0-3 each the only pair
+    /// between their groups when they come; the bridge 1-4 then joins {0, 1} and {4, 5}, and
+    /// in the next pass 2-5 and 0-3 close a loop between {0, 1, 4, 5} and {2, 3}.
+    #[test]
+    fn a_pair_refused_for_want_of_a_loop_is_tried_again_when_the_groups_have_grown() {
+        let config = Config {
+            num_threads: 1,
+            ..Config::default()
+        };
+        let (prepared, mut pairs) = problem(37, 6, &config);
+        let verified = [(0, 1), (2, 3), (4, 5), (2, 5), (0, 3), (1, 4)];
+        let chosen = choose(&pairs, &verified);
+        let rejected: Vec<bool> = chosen.iter().map(Option::is_none).collect();
+        let tolerance = loop_tolerance(&prepared);
+        let index = |pairs: &[Pair], e: (usize, usize)| {
+            pairs
+                .iter()
+                .position(|p| (p.edge.source, p.edge.target) == e)
+                .unwrap()
+        };
+        for (e, support) in verified.iter().zip([300, 290, 280, 200, 100, 50]) {
+            let i = index(&pairs, *e);
+            pairs[i].supports = vec![support];
+        }
+        let index = |e: (usize, usize)| index(&pairs, e);
+        let mut bridge = vec![false; pairs.len()];
+        bridge[index((1, 4))] = true;
+        let (placed, used, group) =
+            place(&pairs, &chosen, &rejected, &bridge, 6, tolerance, &|_| true);
+        assert!(placed.iter().all(Option::is_some), "{group:?}");
+        for e in [(1, 4), (2, 5)] {
+            assert!(used.contains(&index(e)), "{e:?} {used:?}");
+        }
+        // Without the bridge, no pair between the three groups closes a loop.
+        let (apart, _, _) = place(
+            &pairs,
+            &chosen,
+            &rejected,
+            &vec![false; pairs.len()],
+            6,
+            tolerance,
+            &|_| true,
+        );
+        assert_eq!(apart.iter().filter(|p| p.is_some()).count(), 2);
     }
 
     /// Bridge candidates: the neighbours in the given order across groups, and the pair of
