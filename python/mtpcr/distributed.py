@@ -475,8 +475,12 @@ class _Progress:
 
 def _drain(ray, pending: dict, on_ready: Callable[[Any, Any], None]) -> None:
     """Waits for every task of ``pending`` (ref -> tag), calling ``on_ready(tag, value)`` as
-    each arrives (``value`` the exception when ``ray.get`` raised). On any error (also
-    Ctrl-C) the tasks not done yet are cancelled."""
+    each arrives (``value`` the exception when ``ray.get`` raised). On Ctrl-C the tasks not
+    done yet are cancelled; on any other error they are left to finish (their results
+    dropped): cancelling a task that is just completing aborts the driver inside Ray ("Check
+    failed: it != submissible_tasks_.end()", ray-project/ray#54846; it killed this module's
+    scene test once in CI with Ray 2.60), and a failed scene must not take the caller's
+    process with it."""
     try:
         while pending:
             ready, _ = ray.wait(list(pending), num_returns=1)
@@ -488,12 +492,13 @@ def _drain(ray, pending: dict, on_ready: Callable[[Any, Any], None]) -> None:
                 except Exception as e:  # a worker that died, a cancelled task, ...
                     value = e
                 on_ready(tag, value)
-    finally:
+    except KeyboardInterrupt:
         for ref in pending:
             try:
                 ray.cancel(ref)
             except Exception:
                 pass
+        raise
 
 
 # --------------------------------------------------------------------------------------------
@@ -525,7 +530,8 @@ def register_batch(
     are not affected. ``results``: a JSON-lines file each result is appended to as it
     arrives; items whose key is already there as a success are not run again (failures are
     retried). ``on_result(result, done, total)`` is called as results arrive (an exception
-    in it cancels what is still running and propagates); ``progress`` prints a count to
+    in it propagates; what is still running finishes and is dropped, while Ctrl-C cancels
+    it); ``progress`` prints a count to
     stderr. ``address``: the Ray cluster (see :func:`ray.init`), used only when Ray is not
     initialised yet.
     """
