@@ -531,9 +531,8 @@ def register_batch(
     arrives; items whose key is already there as a success are not run again (failures are
     retried). ``on_result(result, done, total)`` is called as results arrive (an exception
     in it propagates; what is still running finishes and is dropped, while Ctrl-C cancels
-    it); ``progress`` prints a count to
-    stderr. ``address``: the Ray cluster (see :func:`ray.init`), used only when Ray is not
-    initialised yet.
+    it); ``progress`` prints a count to stderr. ``address``: the Ray cluster (see
+    :func:`ray.init`), used only when Ray is not initialised yet.
     """
     if not isinstance(num_threads, int) or num_threads < 1:
         raise ValueError(f"num_threads must be an integer of at least 1, got {num_threads!r}")
