@@ -21,7 +21,6 @@ for errf in sys.argv[1:]:
         a,d=error(g,np.linalg.inv(P[t])@P[s])
         cls="right" if a<5 and d<.15 else ("wrong" if a>15 or d>.3 else "off")
         rows.append((key,errf.split('/')[-1][:2],rnd,s,t,m.group(4),float(m.group(5)),float(m.group(6)),float(m.group(7)),cls,a,d))
-import collections
 for cls in ("right","off","wrong"):
     r=np.array([x[6] for x in rows if x[9]==cls])
     if len(r): print(cls,len(r),"res pct 50/90/99/max",np.percentile(r,[50,90,99]).round(3),r.max().round(3),"above 0.25:",(r>0.25).sum(),"above 0.30:",(r>0.3).sum(),"above 0.35:",(r>0.35).sum())

@@ -10,7 +10,6 @@ motion={int(m.group(1)):matrix(m.group(2)) for m in re.finditer(r"DBG motion (\d
 rounds=re.findall(r"DBG round \d+ placed \d+ groups (\[\[.*\]\])",err)
 groups=json.loads(rounds[0]); gid={v:i for i,g in enumerate(groups) for v in g}
 cam=lambda M,j:(M@P[j])[:3,3]
-seen=set()
 for m in re.finditer(r"DBG (chosen|look first|look second) (\d+) (\d+) .*?T \[([^\]]*)\]",err):
     kind,s,t=m.group(1),int(m.group(2)),int(m.group(3))
     if s not in gid or t not in gid or gid[s]==gid[t]: continue
@@ -18,7 +17,7 @@ for m in re.finditer(r"DBG (chosen|look first|look second) (\d+) (\d+) .*?T \[([
     a,d=error(g,np.linalg.inv(P[t])@P[s])
     A,B=groups[gid[s]],groups[gid[t]]
     M=P[s]@np.linalg.inv(g)@np.linalg.inv(P[t])   # moves B (t's group) in the world
-    worst=[];
+    worst=[]
     for i in A:
         for j in B:
             if abs(i-j)<=K:
