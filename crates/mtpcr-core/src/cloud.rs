@@ -6,6 +6,7 @@ use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rand::seq::index;
 use rand::Rng;
 use rand_distr::{Distribution, Normal};
+use rayon::prelude::*;
 use std::num::NonZero;
 
 /// The largest coordinate magnitude [`PointCloud::validate`] accepts (1e30: the observable
@@ -380,9 +381,10 @@ impl PointCloud {
             return 0.0;
         };
         let two = NonZero::new(2usize).expect("2 is not zero");
-        let sum: f64 = self
+        // Queried in parallel, summed in order: the same sum for any number of threads.
+        let distances: Vec<f64> = self
             .points
-            .iter()
+            .par_iter()
             .map(|p| {
                 let nn = tree
                     .query(p)
@@ -390,8 +392,8 @@ impl PointCloud {
                     .execute();
                 nn.iter().map(|r| r.distance).fold(0.0, f64::max).sqrt()
             })
-            .sum();
-        sum / self.points.len() as f64
+            .collect();
+        distances.iter().sum::<f64>() / self.points.len() as f64
     }
 
     /// The cloud without its stray points: points whose third-nearest neighbour in the cloud
@@ -410,7 +412,7 @@ impl PointCloud {
         let k = NonZero::new(K + 1).expect("K + 1 is not zero");
         let far: Vec<f64> = self
             .points
-            .iter()
+            .par_iter()
             .map(|p| {
                 let nn = tree
                     .query(p)

@@ -314,19 +314,23 @@ fn median_spacing(tree: &ImmutableKdTree<f64, 3>, points: &[[f64; 3]]) -> f64 {
     if points.len() < 2 {
         return 0.0;
     }
-    // A few neighbours, so that points repeated in the scan do not count as spacing 0.
-    let k = std::num::NonZero::new(8).expect("8 > 0");
+    // The nearest other point, or among a few neighbours the nearest at a distance above 0,
+    // so that points repeated in the scan do not count as spacing 0 (asking for the few
+    // only where the nearest repeats the point: an eight-neighbour query for every point
+    // was 5 % of a 3DMatch pair's time).
+    let nearest_beyond_zero = |p: &[f64; 3], k: usize| {
+        let k = std::num::NonZero::new(k).expect("k > 0");
+        let nn = tree
+            .query(p)
+            .nearest_n::<SquaredEuclidean<f64>>(k)
+            .execute();
+        nn.iter()
+            .find(|r| r.distance > 0.0)
+            .map(|r| r.distance.sqrt())
+    };
     let distances: Vec<f64> = points
-        .iter()
-        .filter_map(|p| {
-            let nn = tree
-                .query(p)
-                .nearest_n::<SquaredEuclidean<f64>>(k)
-                .execute();
-            nn.iter()
-                .find(|r| r.distance > 0.0)
-                .map(|r| r.distance.sqrt())
-        })
+        .par_iter()
+        .filter_map(|p| nearest_beyond_zero(p, 2).or_else(|| nearest_beyond_zero(p, 8)))
         .collect();
     median(distances)
 }
@@ -340,7 +344,7 @@ fn self_residual(points: &[[f64; 3]], normals: &[[f64; 3]]) -> f64 {
     let tree = ImmutableKdTree::<f64, 3>::new_from_slice(&odd)
         .expect("a non-empty finite cloud always builds a KD-tree");
     let distances: Vec<f64> = points
-        .iter()
+        .par_iter()
         .step_by(2)
         .map(|p| {
             let m = tree
