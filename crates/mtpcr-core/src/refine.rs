@@ -317,7 +317,7 @@ fn median_spacing(tree: &ImmutableKdTree<f64, 3>, points: &[[f64; 3]]) -> f64 {
     // The nearest other point, or among a few neighbours the nearest at a distance above 0,
     // so that points repeated in the scan do not count as spacing 0 (asking for the few
     // only where the nearest repeats the point: an eight-neighbour query for every point
-    // was 5 % of a 3DMatch pair's time).
+    // was 4-5 % of a 3DMatch pair's time).
     let nearest_beyond_zero = |p: &[f64; 3], k: usize| {
         let k = std::num::NonZero::new(k).expect("k > 0");
         let nn = tree
