@@ -191,12 +191,9 @@ impl PreparedProblem {
                 })
                 .collect()
         });
-        let mut reasons = Vec::new();
-        if restarts_run > 1 && !agreed && completed {
-            reasons.push(format!(
-                "no two of the {restarts_run} independent restarts ended on the same transforms"
-            ));
-        }
+        let reasons = restarts_doubt(restarts_run, agreed || !completed, pair_measures.as_ref())
+            .into_iter()
+            .collect();
         let verdict = judge(checks, reasons);
         Ok(Registration {
             edges: estimates,
@@ -734,6 +731,21 @@ fn search(
     }
 }
 
+/// The doubt when no two of the `restarts_run` restarts ended on the same transforms
+/// (`settled`: two did, or the search was stopped, which proves nothing either way). Not
+/// for a scene pair registered alone (`pair`: its measures, [`EdgeCheck::landed`] known):
+/// its answer is the hypothesis its matches support most (or the second look's), weighed
+/// with its rival by the verdict's odds, while the restarts compare the poses of largest
+/// overlap, which on scenes often lay floor on floor. Over every visible 3DMatch and
+/// 3DLoMatch pair their disagreement doubted four registered pairs that the odds trusted
+/// and no failed one (RESULTS.md, 2026-12-07, seventh session).
+fn restarts_doubt(restarts_run: usize, settled: bool, pair: Option<&EdgeCheck>) -> Option<String> {
+    let weighed = pair.is_some_and(|m| m.landed.is_some());
+    (restarts_run > 1 && !settled && !weighed).then(|| {
+        format!("no two of the {restarts_run} independent restarts ended on the same transforms")
+    })
+}
+
 /// A well-mixed seed for restart `r` (splitmix64 of the pair).
 fn derive_seed(seed: u64, r: u64) -> u64 {
     let mut z = seed ^ r.wrapping_mul(0x9e37_79b9_7f4a_7c15);
@@ -821,6 +833,42 @@ pub fn register_screened(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn restarts_that_disagree_doubt_all_but_a_scene_pair_weighed_by_its_cues() {
+        let pair = EdgeCheck {
+            source: 0,
+            target: 1,
+            overlap: 0.42,
+            residual: 0.14,
+            self_residual: 0.05,
+            constraint: Some(0.1),
+            support: Some(40),
+            rival_support: Some(0),
+            free_space: Some(0.0),
+            free_share: Some(0.0),
+            landed: Some(1500),
+            tight_support: Some(10),
+        };
+        let why = restarts_doubt(4, false, None).expect("a loop or an object pair");
+        assert!(
+            why.contains("no two of the 4 independent restarts"),
+            "{why}"
+        );
+        // An object pair (no viewpoints: its cues are not weighed) is doubted as before.
+        let object = EdgeCheck {
+            free_space: None,
+            free_share: None,
+            landed: None,
+            tight_support: None,
+            ..pair.clone()
+        };
+        assert!(restarts_doubt(4, false, Some(&object)).is_some());
+        assert_eq!(restarts_doubt(4, false, Some(&pair)), None);
+        // Two agreeing, one restart, or a search stopped early: nothing to say.
+        assert_eq!(restarts_doubt(4, true, None), None);
+        assert_eq!(restarts_doubt(1, false, None), None);
+    }
 
     /// A 3DMatch fragment's pose in its scene (`cloud_bin_k.info.txt`: a header line, then
     /// the 4x4 matrix by rows).
