@@ -17,7 +17,8 @@ def error(t, g):
     return np.degrees(np.arccos(np.clip((np.trace(r) - 1) / 2, -1, 1))), np.linalg.norm(t[:3, 3] - g[:3, 3])
 
 
-def components(n, edges):
+def groups_of(n, edges):
+    """The fragments 0..n-1 joined by `edges`, as lists, largest first."""
     parent = list(range(n))
 
     def find(x):
@@ -28,10 +29,10 @@ def components(n, edges):
 
     for s, t in edges:
         parent[find(s)] = find(t)
-    sizes = {}
+    groups = {}
     for v in range(n):
-        sizes[find(v)] = sizes.get(find(v), 0) + 1
-    return sorted(sizes.values(), reverse=True)
+        groups.setdefault(find(v), []).append(v)
+    return sorted(groups.values(), key=len, reverse=True)
 
 
 room, errf = sys.argv[1], sys.argv[2]
@@ -65,22 +66,10 @@ for name, ok in rules.items():
             ranked = sorted(hs, key=lambda x: (-x[0], x[1]))[:k]
             if any(ok(a, d) for _, _, a, d in ranked):
                 edges.append((s, t))
-        print(f"  {name:36s} {label:16s} pairs {len(edges):4d} groups {components(n, edges)[:6]}")
+        print(f"  {name:36s} {label:16s} pairs {len(edges):4d} groups {[len(g) for g in groups_of(n, edges)][:6]}")
 
 # The groups of the widest rule (any right hypothesis), as fragment lists.
 if len(sys.argv) > 3:
     edges = [(s, t) for (s, t), hs in hyps.items() if any(a < 15 and d < 0.3 for _, _, a, d in hs)]
-    parent = list(range(n))
-
-    def find(x):
-        while parent[x] != x:
-            x = parent[x]
-        return x
-
-    for s, t in edges:
-        parent[find(s)] = find(t)
-    groups = {}
-    for v in range(n):
-        groups.setdefault(find(v), []).append(v)
-    for g in sorted(groups.values(), key=len, reverse=True):
+    for g in groups_of(n, edges):
         print("  group", g)
