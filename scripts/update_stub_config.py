@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """Rewrites the Config part of python/mtpcr/_mtpcr.pyi from the installed extension: one
 property per field with the Rust doc comment as its docstring, and the keyword arguments of
-``Config.__init__`` and ``register``. Run after adding a setting (``pip install .`` first);
-``python/tests/test_stubs.py`` checks the result.
+``Config.__init__``, ``register`` and ``screen_pairs``. Run after adding a setting
+(``pip install .`` first); ``python/tests/test_stubs.py`` checks the result.
 """
 
 import re
@@ -57,12 +57,16 @@ def main() -> None:
         flags=re.S,
     )
     kwargs = "".join(f"    {n}: {types[n]} = ...,\n" for n in docs if n != "seed")
-    text = re.sub(
-        r"(def register\(\n.*?    config: Config \| None = None,\n)(.*?)(\) -> Registration:)",
-        lambda m: m.group(1) + kwargs + m.group(3),
-        text,
-        flags=re.S,
-    )
+    # The settings of `register` and `screen_pairs`: after `config` and the keywords that
+    # are not settings (viewpoints, screening), up to the return type.
+    for function, returns in (("register", "Registration"), ("screen_pairs", "dict")):
+        text = re.sub(
+            rf"(def {function}\(\n.*?    config: Config \| None = None,\n"
+            r"(?:    (?:viewpoints|screening): [^\n]*\n)*)(.*?)(\) -> " + returns + ")",
+            lambda m: m.group(1) + kwargs + m.group(3),
+            text,
+            flags=re.S,
+        )
     STUB.write_text(text)
     print(f"rewrote the Config part of {STUB}")
 

@@ -78,6 +78,8 @@ pub struct SettingsArgs {
     #[arg(long, value_name = "N")]
     pub hypotheses: Option<usize>,
     #[arg(long, value_name = "BOOL")]
+    pub second_look: Option<bool>,
+    #[arg(long, value_name = "BOOL")]
     pub stop_when_restarts_agree: Option<bool>,
     #[arg(long, value_name = "RATIO")]
     pub feature_voxel_ratio: Option<f64>,
@@ -128,6 +130,7 @@ impl SettingsArgs {
             restarts,
             refine_iterations,
             hypotheses,
+            second_look,
             stop_when_restarts_agree,
             feature_voxel_ratio,
             num_threads,

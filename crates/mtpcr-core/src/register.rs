@@ -127,7 +127,10 @@ impl PreparedProblem {
             // In the pool: the measures and the second look use its threads (`num_threads`).
             pool.install(|| -> Result<()> {
                 let mut measures = self.pair_check(e, &centred[0], m, &hypotheses[0]);
-                if self.has_viewpoints() && doubts(std::slice::from_ref(&measures))[0].is_some() {
+                if config.second_look
+                    && self.has_viewpoints()
+                    && doubts(std::slice::from_ref(&measures))[0].is_some()
+                {
                     if let Some(look) = self.second_look(e, config, &pool)? {
                         if look.measures.scene_log_odds() > measures.scene_log_odds() {
                             centred[0] = look.pose;
