@@ -57,12 +57,12 @@ def main() -> None:
         flags=re.S,
     )
     kwargs = "".join(f"    {n}: {types[n]} = ...,\n" for n in docs if n != "seed")
-    # The settings of `register` and `screen_pairs`: after `config` and the keywords that
-    # are not settings (viewpoints, screening), up to the return type.
+    # The settings of `register` and `screen_pairs`: their last keywords, from the first
+    # Config field up to the return type (the keywords before it stay as written).
+    first = next(iter(docs))
     for function, returns in (("register", "Registration"), ("screen_pairs", "dict")):
         text = re.sub(
-            rf"(def {function}\(\n.*?    config: Config \| None = None,\n"
-            r"(?:    (?:viewpoints|screening): [^\n]*\n)*)(.*?)(\) -> " + returns + ")",
+            rf"(def {function}\(\n.*?\n)(    {first}: .*?)(\) -> {returns})",
             lambda m: m.group(1) + kwargs + m.group(3),
             text,
             flags=re.S,
