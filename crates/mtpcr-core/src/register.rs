@@ -313,6 +313,33 @@ impl PreparedProblem {
         }))
     }
 
+    /// The pair `e` of this problem registered as a pair alone is (its first look, and the
+    /// second where the pair verdict doubts the first), each answer refined by the pair's own
+    /// ICP: the pose (centred, source -> target) and its matches when the pair verdict trusts it.
+    pub(crate) fn pair_alone(
+        &self,
+        e: Edge,
+        config: &Config,
+        pool: &rayon::ThreadPool,
+    ) -> Result<Option<(Rigid, usize)>> {
+        let (s, t) = (e.source, e.target);
+        let pair_icp = |start: Rigid| Ok((self.refine_pair(e, start, config, pool), None));
+        let trusted = |look: Option<Look>| {
+            look.filter(|l| doubts(std::slice::from_ref(&l.measures))[0].is_none())
+        };
+        let Some(found) = self.pair_hypotheses(s, t, config.hypotheses, HypothesisSearch::Pair)?
+        else {
+            return Ok(None);
+        };
+        if let Some(first) = trusted(self.look(e, found, pair_icp)?) {
+            return Ok(Some((first.pose, first.support)));
+        }
+        let Some(found) = self.pair_hypotheses_finer(s, t, config.hypotheses, pool)? else {
+            return Ok(None);
+        };
+        Ok(trusted(self.look(e, found, pair_icp)?).map(|l| (l.pose, l.support)))
+    }
+
     /// A bridge for scans in no known order whose placement leaves them apart: the pair `e`
     /// of this problem registered as a pair alone is, twice (the first look's keypoints and
     /// the second look's finer ones, each answer refined by the pair's own ICP), the pose
