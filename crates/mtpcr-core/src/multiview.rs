@@ -220,17 +220,42 @@ fn bridge_groups(
     prepared.interrupt().check()?;
     for (&p, found) in apart.iter().zip(found) {
         if let Some((pose, support)) = found {
-            let Edge { source, target } = pairs[p].edge;
-            let overlap = 1.0 - prepared.inlier_loss(source, target).evaluate(&pose);
-            pairs[p].poses = vec![(pose.to_matrix(), overlap)];
-            pairs[p].supports = vec![support];
-            chosen[p] = Some(0);
-            rejected[p] = false;
-            bridge[p] = true;
+            make_bridge(
+                prepared,
+                p,
+                pose,
+                support,
+                pairs,
+                chosen,
+                rejected,
+                &mut bridge,
+            );
         }
     }
     place_alone_scans(prepared, config, pool, pairs, chosen, rejected, &mut bridge)?;
     Ok(bridge)
+}
+
+/// Pair `p` made a bridge at `pose` (centred, source -> target) with `support` matches: its
+/// only hypothesis, chosen and not rejected.
+#[allow(clippy::too_many_arguments)]
+fn make_bridge(
+    prepared: &PreparedProblem,
+    p: usize,
+    pose: Rigid,
+    support: usize,
+    pairs: &mut [Pair],
+    chosen: &mut [Option<usize>],
+    rejected: &mut [bool],
+    bridge: &mut [bool],
+) {
+    let Edge { source, target } = pairs[p].edge;
+    let overlap = 1.0 - prepared.inlier_loss(source, target).evaluate(&pose);
+    pairs[p].poses = vec![(pose.to_matrix(), overlap)];
+    pairs[p].supports = vec![support];
+    chosen[p] = Some(0);
+    rejected[p] = false;
+    bridge[p] = true;
 }
 
 /// Placed scans a scan left alone is registered with as pairs alone, at most
@@ -320,13 +345,7 @@ fn place_alone_scans(
         if let Some((i, j)) = agreeing {
             for k in [i, j] {
                 let (p, pose, support, _) = placed[k];
-                let Edge { source, target } = pairs[p].edge;
-                let overlap = 1.0 - prepared.inlier_loss(source, target).evaluate(&pose);
-                pairs[p].poses = vec![(pose.to_matrix(), overlap)];
-                pairs[p].supports = vec![support];
-                chosen[p] = Some(0);
-                rejected[p] = false;
-                bridge[p] = true;
+                make_bridge(prepared, p, pose, support, pairs, chosen, rejected, bridge);
             }
         }
     }

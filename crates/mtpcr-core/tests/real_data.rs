@@ -225,7 +225,12 @@ fn a_kitchen_fragment_left_alone_is_placed_by_two_pairs_that_agree() {
         })
         .collect();
     let scans: Vec<String> = (0..fragments)
-        .map(|k| scene.join(format!("cloud_bin_{k}.ply")).display().to_string())
+        .map(|k| {
+            scene
+                .join(format!("cloud_bin_{k}.ply"))
+                .display()
+                .to_string()
+        })
         .collect();
     let file = std::env::temp_dir().join(format!("mtpcr-kitchen-{}.json", std::process::id()));
     let json = serde_json::json!({
@@ -239,8 +244,15 @@ fn a_kitchen_fragment_left_alone_is_placed_by_two_pairs_that_agree() {
         num_threads: 2,
         ..Config::default()
     };
-    let run = run_moved_views(&clouds, &problem.poses, &[], PairSuccess::default(), &config, 0)
-        .unwrap_or_else(|e| panic!("{e}"));
+    let run = run_moved_views(
+        &clouds,
+        &problem.poses,
+        &[],
+        PairSuccess::default(),
+        &config,
+        0,
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
     let placed = run.scores.rot_deg.iter().filter(|r| r.is_some()).count();
     assert_eq!(placed, fragments, "{:?}", run.result.unplaced);
     assert_eq!(run.scores.wrong(15.0, 0.3), 0, "{:?}", run.scores);
