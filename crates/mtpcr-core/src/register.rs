@@ -322,22 +322,37 @@ impl PreparedProblem {
         config: &Config,
         pool: &rayon::ThreadPool,
     ) -> Result<Option<(Rigid, usize)>> {
-        let (s, t) = (e.source, e.target);
-        let pair_icp = |start: Rigid| Ok((self.refine_pair(e, start, config, pool), None));
         let trusted = |look: Option<Look>| {
             look.filter(|l| doubts(std::slice::from_ref(&l.measures))[0].is_none())
         };
-        let Some(found) = self.pair_hypotheses(s, t, config.hypotheses, HypothesisSearch::Pair)?
-        else {
-            return Ok(None);
-        };
-        if let Some(first) = trusted(self.look(e, found, pair_icp)?) {
+        if let Some(first) = trusted(self.pair_look(e, config, pool, false)?) {
             return Ok(Some((first.pose, first.support)));
         }
-        let Some(found) = self.pair_hypotheses_finer(s, t, config.hypotheses, pool)? else {
+        Ok(trusted(self.pair_look(e, config, pool, true)?).map(|l| (l.pose, l.support)))
+    }
+
+    /// One look at pair `e` as a pair alone (at the first look's keypoints, or the second
+    /// look's finer ones when `finer`), its answer refined by the pair's own ICP; `None`
+    /// without hypotheses.
+    fn pair_look(
+        &self,
+        e: Edge,
+        config: &Config,
+        pool: &rayon::ThreadPool,
+        finer: bool,
+    ) -> Result<Option<Look>> {
+        let (s, t) = (e.source, e.target);
+        let found = if finer {
+            self.pair_hypotheses_finer(s, t, config.hypotheses, pool)?
+        } else {
+            self.pair_hypotheses(s, t, config.hypotheses, HypothesisSearch::Pair)?
+        };
+        let Some(found) = found else {
             return Ok(None);
         };
-        Ok(trusted(self.look(e, found, pair_icp)?).map(|l| (l.pose, l.support)))
+        self.look(e, found, |start| {
+            Ok((self.refine_pair(e, start, config, pool), None))
+        })
     }
 
     /// A bridge for scans in no known order whose placement leaves them apart: the pair `e`
@@ -354,25 +369,16 @@ impl PreparedProblem {
         config: &Config,
         pool: &rayon::ThreadPool,
     ) -> Result<Option<(Rigid, usize)>> {
-        let (s, t) = (e.source, e.target);
-        let pair_icp = |start: Rigid| Ok((self.refine_pair(e, start, config, pool), None));
         // Judged by the six cues a room's screened pairs are judged by
         // (`verdict::SCREENED_SCENE_ODDS`): with the three a pair alone adds, the hotel's
         // bridge 10-47 (seed 0) passes both looks 118 degrees off and glues fragment 47
         // (RESULTS.md, 2026-12-06, seventh session).
         let trusted =
             |look: Option<Look>| look.filter(|l| doubts(&[l.measures.as_screened()])[0].is_none());
-        let Some(found) = self.pair_hypotheses(s, t, config.hypotheses, HypothesisSearch::Pair)?
-        else {
+        let Some(first) = trusted(self.pair_look(e, config, pool, false)?) else {
             return Ok(None);
         };
-        let Some(first) = trusted(self.look(e, found, pair_icp)?) else {
-            return Ok(None);
-        };
-        let Some(found) = self.pair_hypotheses_finer(s, t, config.hypotheses, pool)? else {
-            return Ok(None);
-        };
-        let Some(second) = trusted(self.look(e, found, pair_icp)?) else {
+        let Some(second) = trusted(self.pair_look(e, config, pool, true)?) else {
             return Ok(None);
         };
         let (a, b) = (first.pose.to_matrix(), second.pose.to_matrix());
